@@ -1,0 +1,92 @@
+//! The record of one simulated run: what the runner produces and what the report
+//! (summary.json, trace.csv, plots) consumes. Plain data, no behaviour.
+
+use serde::Serialize;
+
+/// Names of the 8 drive parameters θ1 (eq. 25 order), for CSV headers and plots.
+pub const THETA_DRIVE_NAMES: [&str; 8] = [
+    "th11", "th12", "th13", "th14", "th15", "th16", "th17", "th18",
+];
+/// Names of the 6 sense parameters θ2 (eq. 25 order).
+pub const THETA_SENSE_NAMES: [&str; 6] = ["th21", "th22", "th23", "th24", "th25", "th26"];
+/// Physical parameters recovered by the corrected Table 3, in this order.
+pub const PHYS_NAMES: [&str; 12] = [
+    "mu_x", "mu_y", "mu_xy", "wx2", "wy2", "wxy2", "alpha_x", "alpha_y", "beta1", "beta3",
+    "gamma", "gamma_p",
+];
+/// Health flags in bit order (bit i of `TraceRow::health` is `HEALTH_NAMES[i]`).
+pub const HEALTH_NAMES: [&str; 8] = [
+    "inputs_valid",
+    "excitation_ok",
+    "covariance_bounded",
+    "change_detected",
+    "drive_locked",
+    "settled",
+    "gated",
+    "retuning",
+];
+
+/// One 500 Hz sample of a run.
+#[derive(Clone, Debug, Serialize)]
+pub struct TraceRow {
+    /// Time since the start of the run, s.
+    pub t_s: f64,
+    /// Pump frequency 2Ω/2π in effect at this sample, Hz.
+    pub pump_hz: f64,
+    /// Pump centre frequency (without the dither), Hz.
+    pub pump_centre_hz: f64,
+    /// Pump voltage scale s = V_A²/V_A0².
+    pub pump_scale: f64,
+    /// True θ1 (drive, 8) of the simulated plant at this sample.
+    pub theta_drive_true: [f64; 8],
+    /// True θ2 (sense, 6).
+    pub theta_sense_true: [f64; 6],
+    /// Estimated θ1.
+    pub theta_drive_est: [f64; 8],
+    /// Estimated θ2.
+    pub theta_sense_est: [f64; 6],
+    /// True physical parameters (order of `PHYS_NAMES`).
+    pub phys_true: [f64; 12],
+    /// Estimated physical parameters.
+    pub phys_est: [f64; 12],
+    /// True angular rate, °/s.
+    pub rate_dps_true: f64,
+    /// Estimated angular rate, °/s.
+    pub rate_dps_est: f64,
+    /// Drive fundamental amplitude |A1| from the lock-in, µm.
+    pub drive_amp_um: f64,
+    /// Sense fundamental amplitude |B1| from the lock-in, µm.
+    pub sense_amp_um: f64,
+    /// Health bits (see `HEALTH_NAMES`).
+    pub health: u32,
+    /// Cumulative count of covariance resets by the change detector.
+    pub resets: u32,
+    /// Cumulative count of samples flagged as bad input and skipped.
+    pub bad_samples: u32,
+}
+
+/// Something that happened during a run (change detected, retune started, ...).
+#[derive(Clone, Debug, Serialize)]
+pub struct Event {
+    /// Time, s.
+    pub t_s: f64,
+    /// Short description.
+    pub what: String,
+}
+
+/// A whole run: the trace, the events and the summary values.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunResult {
+    /// Scenario name.
+    pub scenario: String,
+    /// "f32" or "f64".
+    pub precision: String,
+    /// One row per 500 Hz sample.
+    pub trace: Vec<TraceRow>,
+    /// Events in time order.
+    pub events: Vec<Event>,
+    /// The summary (written as summary.json).
+    pub summary: serde_json::Value,
+    /// A twin run's trace (e.g. `drift-retune` without the retune), if the scenario asks for one.
+    pub twin: Option<Vec<TraceRow>>,
+}
