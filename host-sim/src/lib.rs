@@ -3,4 +3,7 @@
 
 pub mod lockin;
 pub mod plant;
+pub mod report;
+pub mod runner;
+pub mod scenario;
 pub mod trace;
