@@ -14,7 +14,10 @@ pub struct Cplx<T> {
 
 impl<T: Real> Cplx<T> {
     /// Zero.
-    pub const ZERO: Self = Cplx { re: T::ZERO, im: T::ZERO };
+    pub const ZERO: Self = Cplx {
+        re: T::ZERO,
+        im: T::ZERO,
+    };
     /// From parts.
     #[inline]
     pub fn new(re: T, im: T) -> Self {
@@ -23,7 +26,10 @@ impl<T: Real> Cplx<T> {
     /// Complex conjugate.
     #[inline]
     pub fn conj(self) -> Self {
-        Cplx { re: self.re, im: -self.im }
+        Cplx {
+            re: self.re,
+            im: -self.im,
+        }
     }
     /// |z|².
     #[inline]
@@ -38,12 +44,18 @@ impl<T: Real> Cplx<T> {
     /// z · r for real r.
     #[inline]
     pub fn scale(self, r: T) -> Self {
-        Cplx { re: self.re * r, im: self.im * r }
+        Cplx {
+            re: self.re * r,
+            im: self.im * r,
+        }
     }
     /// i·z.
     #[inline]
     pub fn mul_i(self) -> Self {
-        Cplx { re: -self.im, im: self.re }
+        Cplx {
+            re: -self.im,
+            im: self.re,
+        }
     }
     /// Both parts finite.
     #[inline]
@@ -53,7 +65,10 @@ impl<T: Real> Cplx<T> {
     /// Conversion between precisions.
     #[inline]
     pub fn cast<U: Real>(self) -> Cplx<U> {
-        Cplx { re: U::from_f64(self.re.to_f64()), im: U::from_f64(self.im.to_f64()) }
+        Cplx {
+            re: U::from_f64(self.re.to_f64()),
+            im: U::from_f64(self.im.to_f64()),
+        }
     }
 }
 
@@ -61,7 +76,10 @@ impl<T: Real> Add for Cplx<T> {
     type Output = Self;
     #[inline]
     fn add(self, o: Self) -> Self {
-        Cplx { re: self.re + o.re, im: self.im + o.im }
+        Cplx {
+            re: self.re + o.re,
+            im: self.im + o.im,
+        }
     }
 }
 impl<T: Real> AddAssign for Cplx<T> {
@@ -75,20 +93,29 @@ impl<T: Real> Sub for Cplx<T> {
     type Output = Self;
     #[inline]
     fn sub(self, o: Self) -> Self {
-        Cplx { re: self.re - o.re, im: self.im - o.im }
+        Cplx {
+            re: self.re - o.re,
+            im: self.im - o.im,
+        }
     }
 }
 impl<T: Real> Neg for Cplx<T> {
     type Output = Self;
     #[inline]
     fn neg(self) -> Self {
-        Cplx { re: -self.re, im: -self.im }
+        Cplx {
+            re: -self.re,
+            im: -self.im,
+        }
     }
 }
 impl<T: Real> Mul for Cplx<T> {
     type Output = Self;
     #[inline]
     fn mul(self, o: Self) -> Self {
-        Cplx { re: self.re * o.re - self.im * o.im, im: self.re * o.im + self.im * o.re }
+        Cplx {
+            re: self.re * o.re - self.im * o.im,
+            im: self.re * o.im + self.im * o.re,
+        }
     }
 }

@@ -1,0 +1,1371 @@
+//! Bierman UD recursive least squares with exponential forgetting, a trace bound
+//! against covariance wind-up, covariance reset and guard statistics.
+//!
+//! # Model
+//!
+//! One instance estimates one axis: [`Rls<T, 8>`](Rls) for the drive row θ1 and
+//! [`Rls<T, 6>`](Rls) for the sense row θ2. The caller has already
+//!
+//! * scaled the regressor columns by the nominal |θ| (so every parameter is O(1)),
+//! * weighted the rows so that the measurement noise has unit variance, and
+//! * subtracted the nominal prediction, so the filter estimates the *deviation*
+//!   `x = (θ − θ_nom) / scale` (FINDINGS.md §4, "deviation form").
+//!
+//! The measurement model is therefore `y = φᵀx + e`, `e ~ N(0, 1)`, and the filter is
+//! the exact Bayesian / weighted-least-squares solution for it: after `n` samples, each
+//! opened by [`Rls::begin_sample`] and followed by any number of [`Rls::update`]s, the
+//! estimate minimises
+//!
+//! ```text
+//!   Σ_k λ^(n−k) Σ_rows (y − φᵀx)²  +  λ^n (x − x₀)ᵀ P₀⁻¹ (x − x₀)
+//! ```
+//!
+//! and `P` is the inverse of that quadratic form's Hessian (the host tests check both
+//! against a batch solution to 1e-9 / 1e-8).
+//!
+//! # Why UD, why this shape
+//!
+//! The drive rows cancel terms of size ~1 down to ~1e-7 (FINDINGS.md §4). In `f32` the
+//! textbook covariance form `P ← P − K φᵀP` loses positive definiteness (prototype:
+//! min eigenvalue −1.1e4; the host test
+//! `ud_f32_stays_positive_definite_on_ill_conditioned_rows` reproduces it: on rows with
+//! column scales 1e-6…1e3 the f32 covariance form is indefinite in 495 of 5000 samples
+//! with diagonal entries down to −4.2e3, while the f32 UD filter passes a Cholesky test
+//! after every sample and stays within 2e-4 of the f64 filter). Bierman's UD
+//! form stores `P = U D Uᵀ` with `U` unit upper triangular and `D` diagonal; every
+//! update multiplies `D_j` by a ratio of positive numbers, so `P` is positive definite
+//! by construction and only the floor guard below is ever needed. Forgetting is
+//! `D ← D/λ` (U is unchanged), a reset is `U = I, D = p·I`.
+//!
+//! The a-priori innovation `y − φᵀx` is the one place where the ill-conditioning bites
+//! even in the deviation form. It is formed with a compensated dot product (error-free
+//! products via Veltkamp/Dekker splitting plus Neumaier-style error-free sums, Ogita,
+//! Rump & Oishi's `Dot2`), which is as accurate as forming it in twice the working
+//! precision and then rounding once, without needing `f64` on the chip.
+//!
+//! # Anti-windup
+//!
+//! Without excitation (steady operation is only rank 5 of 8) forgetting inflates `P`
+//! geometrically, by `1/λ` per sample: 148× in 10 s at λ = 0.999, and an idle `f32`
+//! filter would overflow after a few minutes. [`Rls::begin_sample`] therefore skips
+//! the forgetting step whenever `trace(P) ≥ trace_max` (and whenever `trace(P)/λ`
+//! would not be finite), so `trace(P) ≤ max(trace(P₀), trace_max/λ)` forever.
+//! FINDINGS.md recommends `trace_max` = 10× the converged trace.
+//!
+//! # Guards (never panic, never allocate)
+//!
+//! * Non-finite `φ` or `y`, a non-finite innovation, a non-finite or non-positive
+//!   `s = 1 + φᵀPφ`, or an update that would produce a non-finite state: the state is
+//!   left bit-for-bit untouched, the returned [`Innovation`] is flagged and
+//!   [`RlsStats::skipped_non_finite`] counts it. The update is computed on a copy and
+//!   committed only when every new value is finite.
+//! * `D_j` below [`D_FLOOR`] (possible only through underflow) is clamped to the floor
+//!   and counted in [`RlsStats::d_floor_hits`].
+//! * All loops run over `0..N` on `[T; N]` arrays, so no index can be out of bounds.
+//!
+//! # Cost
+//!
+//! Per [`Rls::update`]: about `1.5 N²` multiply-adds for the Bierman step, `N` divisions,
+//! about `22 N` flops for the compensated innovation and `N² + 2N` finiteness checks.
+//! [`Rls::begin_sample`] costs one trace (`N(N+1)/2` multiply-adds) and `N` divisions.
+//!
+//! # Example
+//!
+//! ```
+//! use paragyro_core::rls::{Rls, RlsSettings};
+//!
+//! let settings = RlsSettings::new(0.999_f32, 1e4, 1e5).unwrap();
+//! let mut rls: Rls<f32, 2> = Rls::new(settings);
+//! for k in 0..200 {
+//!     let t = k as f32 * 0.1;
+//!     let phi = [libm::cosf(t), libm::sinf(t)];
+//!     rls.begin_sample();
+//!     let inn = rls.update(&phi, 0.5 * phi[0] - 0.25 * phi[1]);
+//!     assert!(inn.is_applied());
+//! }
+//! let x = rls.estimate();
+//! assert!((x[0] - 0.5).abs() < 1e-4 && (x[1] + 0.25).abs() < 1e-4);
+//! ```
+
+use crate::real::Real;
+use core::fmt;
+
+/// Smallest value a diagonal factor `D_j` may take (in the scaled units of the
+/// parameters, i.e. variance of a unit-noise-normalised deviation).
+///
+/// Exact arithmetic keeps `D_j > 0`; in floating point `D_j` can only reach zero
+/// through underflow of `D_j·α_{j−1}/α_j` when one row carries `|φ| ≳ 1e15`. Such a
+/// value is raised to this floor (which keeps `P` positive definite and the filter
+/// able to learn) and counted in [`RlsStats::d_floor_hits`]. `1e-30` is a normal
+/// number in `f32` (min normal 1.2e-38) and far below the variances a column-scaled,
+/// unit-noise filter with λ < 1 reaches (its memory is ~1/(1−λ) samples).
+pub const D_FLOOR: f64 = 1e-30;
+
+/// Default forgetting factor per 500 Hz sample: memory `1/(1−λ)` = 1000 samples = 2 s
+/// (FINDINGS.md §4, "Forgetting factor").
+pub const DEFAULT_FORGETTING: f64 = 0.999;
+
+/// Default initial covariance scale `P₀ = p0·I` (scaled units: a prior standard
+/// deviation of 100× the nominal |θ|, i.e. effectively uninformative).
+pub const DEFAULT_P0: f64 = 1e4;
+
+/// Default trace bound: `1e5`, above the initial trace `N·p0 = 8e4` of the 8-state
+/// drive filter so forgetting runs from the start, yet finite so that an idle `f32`
+/// filter cannot overflow. A tuned deployment should use 10× the converged trace
+/// (FINDINGS.md §4, "Anti-windup").
+pub const DEFAULT_TRACE_MAX: f64 = 1e5;
+
+/// Configuration of an [`Rls`] filter.
+///
+/// Build it with [`RlsSettings::new`] (validating) or start from
+/// [`Default::default`] and check with [`RlsSettings::validate`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RlsSettings<T> {
+    /// Forgetting factor λ ∈ (0, 1], applied once per sample by
+    /// [`Rls::begin_sample`] as `P ← P/λ`. Default [`DEFAULT_FORGETTING`] (0.999).
+    /// `1` disables forgetting (growing-memory least squares).
+    pub forgetting: T,
+    /// Initial covariance `P₀ = p0·I`, finite and > 0. Default [`DEFAULT_P0`] (1e4).
+    pub p0: T,
+    /// Anti-windup bound: forgetting is skipped while `trace(P) ≥ trace_max`. Must be
+    /// positive; `+∞` (or `T::MAX`) disables the bound. Default [`DEFAULT_TRACE_MAX`].
+    pub trace_max: T,
+}
+
+impl<T: Real> Default for RlsSettings<T> {
+    /// λ = 0.999, p0 = 1e4, trace_max = 1e5 (see the `DEFAULT_*` constants).
+    fn default() -> Self {
+        RlsSettings {
+            forgetting: T::from_f64(DEFAULT_FORGETTING),
+            p0: T::from_f64(DEFAULT_P0),
+            trace_max: T::from_f64(DEFAULT_TRACE_MAX),
+        }
+    }
+}
+
+impl<T: Real> RlsSettings<T> {
+    /// Validating constructor: `forgetting` ∈ (0, 1], `p0` finite and > 0,
+    /// `trace_max` > 0 (may be `+∞`). The error names the first bad field; NaN is
+    /// rejected everywhere.
+    pub fn new(forgetting: T, p0: T, trace_max: T) -> Result<Self, RlsSettingsError> {
+        let s = RlsSettings {
+            forgetting,
+            p0,
+            trace_max,
+        };
+        s.validate().map(|()| s)
+    }
+
+    /// Checks the fields (see [`RlsSettings::new`]); the error names the first bad one,
+    /// in the order `forgetting`, `p0`, `trace_max`.
+    pub fn validate(&self) -> Result<(), RlsSettingsError> {
+        // Written as negated comparisons so that NaN fails every check.
+        if !(self.forgetting > T::ZERO && self.forgetting <= T::ONE) {
+            return Err(RlsSettingsError::Forgetting);
+        }
+        if !(self.p0 > T::ZERO && self.p0.is_finite()) {
+            return Err(RlsSettingsError::P0);
+        }
+        let trace_max_positive = self.trace_max > T::ZERO;
+        if !trace_max_positive {
+            return Err(RlsSettingsError::TraceMax);
+        }
+        Ok(())
+    }
+
+    /// The same settings in another precision (rounded when narrowing), e.g. to run an
+    /// `f64` reference filter beside the `f32` one.
+    pub fn cast<U: Real>(&self) -> RlsSettings<U> {
+        RlsSettings {
+            forgetting: U::from_f64(self.forgetting.to_f64()),
+            p0: U::from_f64(self.p0.to_f64()),
+            trace_max: U::from_f64(self.trace_max.to_f64()),
+        }
+    }
+}
+
+/// A rejected [`RlsSettings`] field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RlsSettingsError {
+    /// `forgetting` is NaN or outside (0, 1].
+    Forgetting,
+    /// `p0` is NaN, infinite or ≤ 0.
+    P0,
+    /// `trace_max` is NaN or ≤ 0.
+    TraceMax,
+}
+
+impl RlsSettingsError {
+    /// The name of the offending field of [`RlsSettings`] (`"forgetting"`, `"p0"` or
+    /// `"trace_max"`).
+    pub const fn field(self) -> &'static str {
+        match self {
+            RlsSettingsError::Forgetting => "forgetting",
+            RlsSettingsError::P0 => "p0",
+            RlsSettingsError::TraceMax => "trace_max",
+        }
+    }
+
+    /// The condition the field must satisfy, for error messages.
+    pub const fn requirement(self) -> &'static str {
+        match self {
+            RlsSettingsError::Forgetting => "must be in (0, 1]",
+            RlsSettingsError::P0 => "must be finite and > 0",
+            RlsSettingsError::TraceMax => "must be > 0 (+inf disables the bound)",
+        }
+    }
+}
+
+impl fmt::Display for RlsSettingsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "invalid RLS setting `{}`: {}",
+            self.field(),
+            self.requirement()
+        )
+    }
+}
+
+impl core::error::Error for RlsSettingsError {}
+
+/// What [`Rls::update`] did with a measurement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum UpdateStatus {
+    /// The update was applied.
+    Applied,
+    /// `φ` or `y` contained NaN or ±∞; nothing was changed.
+    NonFiniteInput,
+    /// The inputs were finite but the innovation, `s = 1 + φᵀPφ` or the updated state
+    /// would not have been finite (overflow) or `s` was not positive; nothing was
+    /// changed.
+    NumericalFault,
+}
+
+/// The a-priori innovation of one scalar measurement, returned by [`Rls::update`].
+///
+/// `e²/s` is the normalised squared innovation: χ²(1)-distributed with mean 1 when the
+/// model holds and the noise has unit variance, which is what a change detector sums.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Innovation<T> {
+    /// `e = y − φᵀx` with the estimate *before* this update (compensated dot product).
+    /// `0` when the update was rejected.
+    pub e: T,
+    /// Variance factor `s = 1 + φᵀPφ` (`P` after this sample's forgetting, before the
+    /// update); the innovation variance in units of the measurement noise. `1` when the
+    /// update was rejected.
+    pub s: T,
+    /// Whether the update was applied, and if not, why.
+    pub status: UpdateStatus,
+}
+
+impl<T: Real> Innovation<T> {
+    /// `true` iff the update was applied ([`UpdateStatus::Applied`]).
+    #[inline]
+    pub fn is_applied(&self) -> bool {
+        self.status == UpdateStatus::Applied
+    }
+
+    /// Normalised squared innovation `e²/s` (0 for a rejected update, so a rejected
+    /// sample never raises a change alarm by itself).
+    #[inline]
+    pub fn normalized_sq(&self) -> T {
+        self.e * self.e / self.s
+    }
+
+    fn rejected(status: UpdateStatus) -> Self {
+        Innovation {
+            e: T::ZERO,
+            s: T::ONE,
+            status,
+        }
+    }
+}
+
+/// Counters of what the guards of an [`Rls`] did since construction (saturating).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RlsStats {
+    /// Measurement updates applied.
+    pub updates: u64,
+    /// Updates rejected: non-finite input, innovation, `s` or result
+    /// ([`UpdateStatus::NonFiniteInput`] and [`UpdateStatus::NumericalFault`]).
+    pub skipped_non_finite: u64,
+    /// Samples whose forgetting step was skipped by the trace bound (or because
+    /// `trace(P)/λ` would overflow).
+    pub forgetting_skipped: u64,
+    /// Diagonal factors raised to [`D_FLOOR`] (one count per clamped `D_j`).
+    pub d_floor_hits: u64,
+    /// Calls of [`Rls::reset_covariance`].
+    pub resets: u64,
+}
+
+/// Bierman UD-factorised recursive least squares for `N` parameters in precision `T`.
+///
+/// `P = U D Uᵀ` with `U` unit upper triangular (stored as a full `[[T; N]; N]`, row
+/// index first, strictly lower part zero, diagonal one) and `D` positive diagonal.
+/// See the [module documentation](self) for the model, the guards and the cost.
+///
+/// Per 500 Hz sample: one [`begin_sample`](Rls::begin_sample), then one
+/// [`update`](Rls::update) per row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rls<T: Real, const N: usize> {
+    settings: RlsSettings<T>,
+    x: [T; N],
+    u: [[T; N]; N],
+    d: [T; N],
+    stats: RlsStats,
+}
+
+impl<T: Real, const N: usize> Rls<T, N> {
+    /// A filter with estimate `x = 0`, `P = p0·I` and zeroed statistics.
+    ///
+    /// The settings are used as given; validate them first ([`RlsSettings::new`] or
+    /// [`Rls::try_new`]). Invalid settings cannot make the filter panic, but e.g. a NaN
+    /// `p0` makes every update be rejected.
+    pub fn new(settings: RlsSettings<T>) -> Self {
+        let mut u = [[T::ZERO; N]; N];
+        for (i, row) in u.iter_mut().enumerate() {
+            if let Some(diag) = row.get_mut(i) {
+                *diag = T::ONE;
+            }
+        }
+        Rls {
+            settings,
+            x: [T::ZERO; N],
+            u,
+            d: [settings.p0; N],
+            stats: RlsStats::default(),
+        }
+    }
+
+    /// [`Rls::new`] after [`RlsSettings::validate`].
+    pub fn try_new(settings: RlsSettings<T>) -> Result<Self, RlsSettingsError> {
+        settings.validate()?;
+        Ok(Self::new(settings))
+    }
+
+    /// The settings this filter was built with.
+    #[inline]
+    pub fn settings(&self) -> &RlsSettings<T> {
+        &self.settings
+    }
+
+    /// Changes the anti-windup bound at run time, e.g. to 10× the converged trace once
+    /// the filter has settled (FINDINGS.md §4). Same rule as
+    /// [`RlsSettings::trace_max`]: must be > 0 (`+∞` disables the bound); a NaN or
+    /// non-positive value is ignored and `false` returned.
+    pub fn set_trace_max(&mut self, trace_max: T) -> bool {
+        let candidate = RlsSettings {
+            trace_max,
+            ..self.settings
+        };
+        if candidate.validate().is_ok() {
+            self.settings = candidate;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Opens a sample: exponential forgetting `D ← D/λ` (i.e. `P ← P/λ`), applied once
+    /// per 500 Hz sample before that sample's [`update`](Rls::update)s.
+    ///
+    /// Skipped, and counted in [`RlsStats::forgetting_skipped`], while
+    /// `trace(P) ≥ trace_max` (anti-windup) or when `trace(P)/λ` would not be finite.
+    /// Returns `true` when forgetting was applied (always for λ = 1, where it is a
+    /// no-op and the trace is not even computed).
+    pub fn begin_sample(&mut self) -> bool {
+        let lambda = self.settings.forgetting;
+        if lambda == T::ONE {
+            return true;
+        }
+        let tr = self.trace();
+        // `tr/λ` finite ⇒ every `D_j/λ` finite, since D_j ≤ trace(P) (U_jj = 1).
+        if tr < self.settings.trace_max && (tr / lambda).is_finite() {
+            for d in self.d.iter_mut() {
+                *d /= lambda;
+            }
+            true
+        } else {
+            self.stats.forgetting_skipped = self.stats.forgetting_skipped.saturating_add(1);
+            false
+        }
+    }
+
+    /// One scalar measurement `y = φᵀx + e`, `e ~ N(0, 1)`: Bierman's UD update.
+    ///
+    /// Returns the a-priori innovation `e = y − φᵀx` (compensated dot product) and its
+    /// variance factor `s = 1 + φᵀPφ`. Rejected updates (non-finite input, innovation,
+    /// `s` or result; `s ≤ 0`) leave the state untouched, are counted in
+    /// [`RlsStats::skipped_non_finite`] and return `e = 0, s = 1` with the reason in
+    /// [`Innovation::status`]. New `D_j` below [`D_FLOOR`] are clamped and counted.
+    #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
+    pub fn update(&mut self, phi: &[T; N], y: T) -> Innovation<T> {
+        if !y.is_finite() || phi.iter().any(|p| !p.is_finite()) {
+            return self.reject(UpdateStatus::NonFiniteInput);
+        }
+
+        // f = Uᵀφ, v = D∘f, s = 1 + fᵀv = 1 + φᵀPφ.
+        let mut f = [T::ZERO; N];
+        let mut v = [T::ZERO; N];
+        let mut s = T::ONE;
+        for j in 0..N {
+            let mut acc = phi[j];
+            for i in 0..j {
+                acc += self.u[i][j] * phi[i];
+            }
+            f[j] = acc;
+            v[j] = self.d[j] * acc;
+            s += acc * v[j];
+        }
+        let e = residual(y, phi, &self.x);
+        if !(s > T::ZERO && s.is_finite() && e.is_finite()) {
+            return self.reject(UpdateStatus::NumericalFault);
+        }
+
+        // Bierman's update on copies; committed only if everything stays finite.
+        let mut u = self.u;
+        let mut d = self.d;
+        let mut k = [T::ZERO; N];
+        let mut alpha = T::ONE;
+        for j in 0..N {
+            let alpha_prev = alpha;
+            alpha = alpha_prev + f[j] * v[j];
+            d[j] *= alpha_prev / alpha;
+            let lj = -f[j] / alpha_prev;
+            for i in 0..j {
+                let uij = u[i][j];
+                u[i][j] = uij + lj * k[i];
+                k[i] += v[j] * uij;
+            }
+            k[j] = v[j];
+        }
+        // `alpha` now equals `s` (same terms, same order); the gain is k/alpha.
+        let g = e / alpha;
+        let mut x = self.x;
+        for (xi, ki) in x.iter_mut().zip(k.iter()) {
+            *xi += *ki * g;
+        }
+
+        let finite = x.iter().all(|t| t.is_finite())
+            && d.iter().all(|t| t.is_finite())
+            && u.iter().all(|row| row.iter().all(|t| t.is_finite()));
+        if !finite {
+            return self.reject(UpdateStatus::NumericalFault);
+        }
+        let floor = T::from_f64(D_FLOOR);
+        for dj in d.iter_mut() {
+            // `d` is finite here, so a plain comparison catches zero and underflow.
+            if *dj < floor {
+                *dj = floor;
+                self.stats.d_floor_hits = self.stats.d_floor_hits.saturating_add(1);
+            }
+        }
+        self.u = u;
+        self.d = d;
+        self.x = x;
+        self.stats.updates = self.stats.updates.saturating_add(1);
+        Innovation {
+            e,
+            s: alpha,
+            status: UpdateStatus::Applied,
+        }
+    }
+
+    fn reject(&mut self, status: UpdateStatus) -> Innovation<T> {
+        self.stats.skipped_non_finite = self.stats.skipped_non_finite.saturating_add(1);
+        Innovation::rejected(status)
+    }
+
+    /// Covariance reset `P = p·I` (`U = I`, `D = p`), estimate kept; counted in
+    /// [`RlsStats::resets`]. Used by the change detector after an alarm (FINDINGS.md §5:
+    /// `p = 1` in scaled units). A `p` that is NaN, infinite or ≤ 0 is replaced by the
+    /// configured `p0`.
+    pub fn reset_covariance(&mut self, p: T) {
+        let p = if p > T::ZERO && p.is_finite() {
+            p
+        } else {
+            self.settings.p0
+        };
+        for (i, row) in self.u.iter_mut().enumerate() {
+            for (j, uij) in row.iter_mut().enumerate() {
+                *uij = if i == j { T::ONE } else { T::ZERO };
+            }
+        }
+        self.d = [p; N];
+        self.stats.resets = self.stats.resets.saturating_add(1);
+    }
+
+    /// Replaces the estimate (e.g. after re-centring the nominal θ); the covariance is
+    /// kept. Returns `false` and changes nothing if any entry is NaN or ±∞.
+    pub fn set_estimate(&mut self, x: [T; N]) -> bool {
+        if x.iter().all(|t| t.is_finite()) {
+            self.x = x;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// The current estimate `x` (scaled deviation from the nominal θ).
+    #[inline]
+    pub fn estimate(&self) -> [T; N] {
+        self.x
+    }
+
+    /// `trace(P) = Σ_j D_j Σ_{i≤j} U_ij²` (`N(N+1)/2` multiply-adds).
+    #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
+    pub fn trace(&self) -> T {
+        let mut tr = T::ZERO;
+        for j in 0..N {
+            let mut col = T::ZERO;
+            for i in 0..=j {
+                col += self.u[i][j] * self.u[i][j];
+            }
+            tr += self.d[j] * col;
+        }
+        tr
+    }
+
+    /// The covariance `P = U D Uᵀ` (`O(N³)`; for diagnostics and tests, not the tick
+    /// path). The upper triangle is computed and mirrored, so the result is exactly
+    /// symmetric.
+    #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
+    pub fn covariance(&self) -> [[T; N]; N] {
+        let mut p = [[T::ZERO; N]; N];
+        for i in 0..N {
+            for k in i..N {
+                // P_ik = Σ_{j ≥ k} U_ij D_j U_kj   (U upper triangular, i ≤ k)
+                let mut acc = T::ZERO;
+                for j in k..N {
+                    acc += self.u[i][j] * self.d[j] * self.u[k][j];
+                }
+                p[i][k] = acc;
+                p[k][i] = acc;
+            }
+        }
+        p
+    }
+
+    /// The UD factors `(U, D)`: `U` unit upper triangular (row index first), `D` the
+    /// diagonal. For diagnostics and tests.
+    #[inline]
+    pub fn factors(&self) -> ([[T; N]; N], [T; N]) {
+        (self.u, self.d)
+    }
+
+    /// `min_j D_j`, a cheap health indicator (> 0 always; `T::MAX` for `N = 0`).
+    pub fn min_d(&self) -> T {
+        self.d.iter().fold(T::MAX, |m, &dj| m.min(dj))
+    }
+
+    /// Guard statistics since construction.
+    #[inline]
+    pub fn stats(&self) -> RlsStats {
+        self.stats
+    }
+}
+
+/// `true` when `T` has at most single (24-bit) precision, i.e. is `f32`.
+/// Constant-folded.
+#[inline]
+fn is_single<T: Real>() -> bool {
+    // 1e-10 is far below half an ulp of 1 in f32 (6e-8) and far above it in f64 (1.1e-16).
+    T::ONE + T::from_f64(1e-10) == T::ONE
+}
+
+/// Veltkamp splitting of `a` into `hi + lo`, each with at most half the mantissa bits,
+/// using the splitter `c = 2^⌈p/2⌉ + 1`.
+#[inline]
+fn split<T: Real>(a: T, c: T) -> (T, T) {
+    let t = c * a;
+    let hi = t - (t - a);
+    (hi, a - hi)
+}
+
+/// Error-free product (Dekker): `a·b = p + err` exactly, barring over/underflow.
+#[inline]
+fn two_prod<T: Real>(a: T, b: T, c: T) -> (T, T) {
+    let p = a * b;
+    let (ah, al) = split(a, c);
+    let (bh, bl) = split(b, c);
+    let err = al * bl - (((p - ah * bh) - al * bh) - ah * bl);
+    (p, err)
+}
+
+/// Error-free sum (Knuth): `a + b = s + err` exactly.
+#[inline]
+fn two_sum<T: Real>(a: T, b: T) -> (T, T) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
+
+/// `y − φᵀx` by the compensated dot product `Dot2` (Ogita, Rump & Oishi 2005): as
+/// accurate as evaluating in twice the precision of `T` and rounding once. Falls back
+/// to the plain sum if the splitting overflows (|value| ≳ `T::MAX`/4097).
+fn residual<T: Real, const N: usize>(y: T, phi: &[T; N], x: &[T; N]) -> T {
+    let c = if is_single::<T>() {
+        T::from_f64(4097.0)
+    } else {
+        T::from_f64(134_217_729.0)
+    };
+    let mut sum = y;
+    let mut comp = T::ZERO;
+    for (&p, &xi) in phi.iter().zip(x.iter()) {
+        let (prod, perr) = two_prod(-p, xi, c);
+        let (s2, serr) = two_sum(sum, prod);
+        sum = s2;
+        comp += perr + serr;
+    }
+    let r = sum + comp;
+    if r.is_finite() { r } else { sum }
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // dense matrix algebra in the test oracles
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::vec::Vec;
+
+    /// xorshift64* — tiny deterministic RNG for the tests.
+    struct Rng(u64);
+    impl Rng {
+        fn new(seed: u64) -> Self {
+            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        }
+        fn next_u64(&mut self) -> u64 {
+            let mut x = self.0;
+            x ^= x >> 12;
+            x ^= x << 25;
+            x ^= x >> 27;
+            self.0 = x;
+            x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+        /// Uniform in [−1, 1).
+        fn uni(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        }
+        /// Standard normal (Box–Muller).
+        fn gauss(&mut self) -> f64 {
+            let u1 = ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+            let u2 = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+            libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
+        }
+    }
+
+    /// Lower Cholesky factor, `None` unless the matrix is symmetric positive definite
+    /// (every pivot > 0 and finite).
+    fn cholesky<const N: usize>(a: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {
+        let mut l = [[0.0; N]; N];
+        for j in 0..N {
+            let mut d = a[j][j];
+            for k in 0..j {
+                d -= l[j][k] * l[j][k];
+            }
+            if !(d > 0.0 && d.is_finite()) {
+                return None;
+            }
+            let djj = libm::sqrt(d);
+            l[j][j] = djj;
+            for i in j + 1..N {
+                let mut s = a[i][j];
+                for k in 0..j {
+                    s -= l[i][k] * l[j][k];
+                }
+                l[i][j] = s / djj;
+            }
+        }
+        Some(l)
+    }
+
+    fn chol_solve<const N: usize>(l: &[[f64; N]; N], b: &[f64; N]) -> [f64; N] {
+        let mut z = [0.0; N];
+        for i in 0..N {
+            let mut s = b[i];
+            for k in 0..i {
+                s -= l[i][k] * z[k];
+            }
+            z[i] = s / l[i][i];
+        }
+        let mut x = [0.0; N];
+        for i in (0..N).rev() {
+            let mut s = z[i];
+            for k in i + 1..N {
+                s -= l[k][i] * x[k];
+            }
+            x[i] = s / l[i][i];
+        }
+        x
+    }
+
+    fn inverse_spd<const N: usize>(a: &[[f64; N]; N]) -> [[f64; N]; N] {
+        let l = cholesky(a).expect("information matrix must be SPD");
+        let mut inv = [[0.0; N]; N];
+        for j in 0..N {
+            let mut e = [0.0; N];
+            e[j] = 1.0;
+            let c = chol_solve(&l, &e);
+            for i in 0..N {
+                inv[i][j] = c[i];
+            }
+        }
+        inv
+    }
+
+    fn to_f64_mat<T: Real, const N: usize>(p: &[[T; N]; N]) -> [[f64; N]; N] {
+        let mut out = [[0.0; N]; N];
+        for i in 0..N {
+            for j in 0..N {
+                out[i][j] = p[i][j].to_f64();
+            }
+        }
+        out
+    }
+
+    fn cast_vec<T: Real, const N: usize>(v: &[f64; N]) -> [T; N] {
+        let mut out = [T::ZERO; N];
+        for (o, x) in out.iter_mut().zip(v) {
+            *o = T::from_f64(*x);
+        }
+        out
+    }
+
+    fn norm<const N: usize>(v: &[f64; N]) -> f64 {
+        libm::sqrt(v.iter().map(|x| x * x).sum())
+    }
+
+    fn max_abs<const N: usize>(a: &[[f64; N]; N]) -> f64 {
+        a.iter().flatten().fold(0.0, |m: f64, x| m.max(x.abs()))
+    }
+
+    fn unbounded<T: Real>(lambda: f64, p0: f64) -> RlsSettings<T> {
+        RlsSettings::new(
+            T::from_f64(lambda),
+            T::from_f64(p0),
+            T::from_f64(f64::INFINITY),
+        )
+        .unwrap()
+    }
+
+    /// f64 RLS vs the exact minimiser of
+    /// Σ_k λ^(n−k) Σ_rows (y − φᵀx)² + λ^n xᵀ(p0·I)⁻¹x and its inverse Hessian.
+    fn batch_case<const N: usize>(lambda: f64, seed: u64) -> (f64, f64) {
+        const SAMPLES: usize = 400;
+        const ROWS: usize = 2;
+        let p0 = 1e6;
+        let mut rng = Rng::new(seed);
+        let mut x_true = [0.0; N];
+        for x in x_true.iter_mut() {
+            *x = 2.0 * rng.uni();
+        }
+        let mut rls: Rls<f64, N> = Rls::new(unbounded(lambda, p0));
+        // information matrix and vector, recursively weighted
+        let mut a = [[0.0; N]; N];
+        for (i, row) in a.iter_mut().enumerate() {
+            row[i] = 1.0 / p0;
+        }
+        let mut b = [0.0; N];
+        for _ in 0..SAMPLES {
+            assert!(rls.begin_sample());
+            for row in a.iter_mut() {
+                for v in row.iter_mut() {
+                    *v *= lambda;
+                }
+            }
+            for v in b.iter_mut() {
+                *v *= lambda;
+            }
+            for _ in 0..ROWS {
+                let mut phi = [0.0; N];
+                for p in phi.iter_mut() {
+                    *p = rng.uni();
+                }
+                let y =
+                    phi.iter().zip(&x_true).map(|(p, x)| p * x).sum::<f64>() + 0.1 * rng.gauss();
+                let inn = rls.update(&phi, y);
+                assert!(inn.is_applied());
+                for i in 0..N {
+                    b[i] += phi[i] * y;
+                    for j in 0..N {
+                        a[i][j] += phi[i] * phi[j];
+                    }
+                }
+            }
+        }
+        let l = cholesky(&a).unwrap();
+        let x_ref = chol_solve(&l, &b);
+        let p_ref = inverse_spd(&a);
+        let x = rls.estimate();
+        let mut dx = [0.0; N];
+        for i in 0..N {
+            dx[i] = x[i] - x_ref[i];
+        }
+        let p = rls.covariance();
+        let mut dp = [[0.0; N]; N];
+        for i in 0..N {
+            for j in 0..N {
+                dp[i][j] = p[i][j] - p_ref[i][j];
+            }
+        }
+        assert_eq!(rls.stats().updates, (SAMPLES * ROWS) as u64);
+        assert_eq!(rls.stats().forgetting_skipped, 0);
+        (norm(&dx) / norm(&x_ref), max_abs(&dp) / max_abs(&p_ref))
+    }
+
+    #[test]
+    fn f64_rls_equals_batch_weighted_least_squares() {
+        for (k, lambda) in [0.999, 1.0].into_iter().enumerate() {
+            let (ex8, ep8) = batch_case::<8>(lambda, 11 + k as u64);
+            let (ex6, ep6) = batch_case::<6>(lambda, 23 + k as u64);
+            std::println!(
+                "λ={lambda}: N=8 x rel {ex8:.2e} P rel {ep8:.2e}; N=6 x rel {ex6:.2e} P rel {ep6:.2e}"
+            );
+            assert!(ex8 < 1e-9 && ex6 < 1e-9, "estimate differs from batch LS");
+            assert!(
+                ep8 < 1e-8 && ep6 < 1e-8,
+                "P differs from inverse information"
+            );
+        }
+    }
+
+    #[test]
+    fn innovation_and_variance_factor_are_a_priori() {
+        let mut rng = Rng::new(5);
+        let mut rls: Rls<f64, 6> = Rls::new(RlsSettings::default());
+        for n in 0..200 {
+            rls.begin_sample();
+            let mut phi = [0.0; 6];
+            for p in phi.iter_mut() {
+                *p = rng.uni();
+            }
+            let y = phi[0] - 0.5 * phi[3] + 0.01 * rng.gauss();
+            let x = rls.estimate();
+            let p = rls.covariance();
+            let e_ref = y - phi.iter().zip(&x).map(|(a, b)| a * b).sum::<f64>();
+            let mut s_ref = 1.0;
+            for i in 0..6 {
+                for j in 0..6 {
+                    s_ref += phi[i] * p[i][j] * phi[j];
+                }
+            }
+            let inn = rls.update(&phi, y);
+            assert!(inn.is_applied());
+            assert!(
+                (inn.e - e_ref).abs() <= 1e-12 * (1.0 + e_ref.abs()),
+                "n={n}"
+            );
+            assert!(
+                (inn.s - s_ref).abs() <= 1e-10 * s_ref,
+                "n={n}: {} vs {s_ref}",
+                inn.s
+            );
+            assert!(
+                (inn.normalized_sq() - e_ref * e_ref / s_ref).abs()
+                    <= 1e-9 * (1.0 + inn.normalized_sq())
+            );
+        }
+    }
+
+    /// Ill-conditioned rows: column scales 1e-6 … 1e3 (log-spaced) and strongly
+    /// correlated columns (99.9 % common component), like the drive rows.
+    fn ill_row(rng: &mut Rng) -> [f64; 8] {
+        let common = rng.gauss();
+        let mut phi = [0.0; 8];
+        for (i, p) in phi.iter_mut().enumerate() {
+            let scale = libm::pow(10.0, -6.0 + 9.0 * i as f64 / 7.0);
+            *p = scale * (0.999 * common + 0.001 * rng.gauss());
+        }
+        phi
+    }
+
+    /// Plain covariance-form RLS in f32 (the textbook form, symmetrised each update).
+    struct CovRls {
+        x: [f32; 8],
+        p: [[f32; 8]; 8],
+    }
+    impl CovRls {
+        fn new(p0: f32) -> Self {
+            let mut p = [[0.0; 8]; 8];
+            for (i, row) in p.iter_mut().enumerate() {
+                row[i] = p0;
+            }
+            CovRls { x: [0.0; 8], p }
+        }
+        fn step(&mut self, lambda: f32, phi: &[f32; 8], y: f32) {
+            for row in self.p.iter_mut() {
+                for v in row.iter_mut() {
+                    *v /= lambda;
+                }
+            }
+            let mut pphi = [0.0f32; 8];
+            for i in 0..8 {
+                for j in 0..8 {
+                    pphi[i] += self.p[i][j] * phi[j];
+                }
+            }
+            let den = 1.0 + phi.iter().zip(&pphi).map(|(a, b)| a * b).sum::<f32>();
+            let e = y - phi.iter().zip(&self.x).map(|(a, b)| a * b).sum::<f32>();
+            for i in 0..8 {
+                let k = pphi[i] / den;
+                self.x[i] += k * e;
+                for j in 0..8 {
+                    self.p[i][j] -= k * pphi[j];
+                }
+            }
+            for i in 0..8 {
+                for j in i + 1..8 {
+                    let s = 0.5 * (self.p[i][j] + self.p[j][i]);
+                    self.p[i][j] = s;
+                    self.p[j][i] = s;
+                }
+            }
+        }
+    }
+
+    /// UD in f32 on ill-conditioned rows: D > 0, P symmetric and positive definite (f64
+    /// Cholesky of the f32 P after every sample), estimate finite and close to the f64 UD
+    /// filter on the identifiable columns. The textbook covariance form in f32 on the
+    /// same data loses definiteness (negative diagonal) — measured, then asserted.
+    #[test]
+    fn ud_f32_stays_positive_definite_on_ill_conditioned_rows() {
+        const SAMPLES: usize = 5000;
+        let lambda = 0.999;
+        let p0 = 1e4;
+        let mut rng = Rng::new(77);
+        let x_true = [0.3, -0.2, 0.1, 0.05, -0.4, 0.25, -0.15, 0.2];
+        let mut ud32: Rls<f32, 8> = Rls::new(unbounded(lambda, p0));
+        let mut ud64: Rls<f64, 8> = Rls::new(unbounded(lambda, p0));
+        let mut cov = CovRls::new(p0 as f32);
+        let mut ud_chol_failures = 0usize;
+        let mut cov_chol_failures = 0usize;
+        let mut cov_first_failure: Option<usize> = None;
+        let mut cov_min_diag = f64::INFINITY;
+        for n in 0..SAMPLES {
+            let phi = ill_row(&mut rng);
+            let y = phi.iter().zip(&x_true).map(|(a, b)| a * b).sum::<f64>() + rng.gauss();
+            let phi32: [f32; 8] = cast_vec(&phi);
+            ud32.begin_sample();
+            ud64.begin_sample();
+            assert!(ud32.update(&phi32, y as f32).is_applied(), "n={n}");
+            assert!(ud64.update(&phi, y).is_applied());
+            cov.step(lambda as f32, &phi32, y as f32);
+
+            let (_, d) = ud32.factors();
+            assert!(
+                d.iter().all(|&v| v > 0.0 && v.is_finite()),
+                "n={n}: D = {d:?}"
+            );
+            assert!(ud32.estimate().iter().all(|v| v.is_finite()));
+            let p = ud32.covariance();
+            for i in 0..8 {
+                for j in 0..8 {
+                    assert_eq!(p[i][j].to_bits(), p[j][i].to_bits(), "P not symmetric");
+                }
+            }
+            if cholesky(&to_f64_mat(&p)).is_none() {
+                ud_chol_failures += 1;
+            }
+            let pc = to_f64_mat(&cov.p);
+            for (i, row) in pc.iter().enumerate() {
+                cov_min_diag = cov_min_diag.min(row[i]);
+            }
+            if cholesky(&pc).is_none() || !cov.x.iter().all(|v| v.is_finite()) {
+                cov_chol_failures += 1;
+                cov_first_failure.get_or_insert(n);
+            }
+        }
+        let x32 = ud32.estimate();
+        let x64 = ud64.estimate();
+        let xc = cov.x;
+        std::println!(
+            "UD f32: min D {:.3e}, trace {:.3e}, Cholesky failures {ud_chol_failures}; \
+             cov-form f32: not PD in {cov_chol_failures}/{SAMPLES} samples (first {:?}), \
+             min diag {:.3e}",
+            ud32.min_d(),
+            ud32.trace(),
+            cov_first_failure,
+            cov_min_diag
+        );
+        let (mut ud_err, mut cov_err) = (0.0f64, 0.0f64);
+        for i in 0..8 {
+            std::println!(
+                "  x[{i}] true {:+.4} ud64 {:+.6e} ud32 {:+.6e} cov32 {:+.6e}",
+                x_true[i],
+                x64[i],
+                x32[i],
+                xc[i]
+            );
+            if i >= 5 {
+                // best-determined columns (scale ≥ 1e1): compare with the f64 UD filter
+                ud_err = ud_err.max((x32[i] as f64 - x64[i]).abs() / x64[i].abs());
+                cov_err = cov_err.max((xc[i] as f64 - x64[i]).abs() / x64[i].abs());
+            }
+        }
+        std::println!(
+            "  best-determined columns, rel. deviation from f64 UD: ud32 {ud_err:.2e}, cov32 {cov_err:.2e}"
+        );
+        assert_eq!(ud_chol_failures, 0, "UD f32 covariance failed a Cholesky");
+        assert_eq!(ud32.stats().d_floor_hits, 0);
+        assert_eq!(ud32.stats().skipped_non_finite, 0);
+        assert!(ud_err < 1e-3, "UD f32 drifted from f64: {ud_err:e}");
+        // Measured: the covariance form goes indefinite (negative diagonal entries).
+        assert!(
+            cov_chol_failures > 0 && cov_min_diag < 0.0,
+            "covariance form stayed PD"
+        );
+        // ... and its estimate is much further from the f64 solution (measured ~160×).
+        assert!(
+            cov_err > 10.0 * ud_err,
+            "cov form not worse: {cov_err:e} vs {ud_err:e}"
+        );
+    }
+
+    /// f32 and f64 instantiations agree on a well-conditioned problem.
+    fn f32_vs_f64<const N: usize>(seed: u64) -> (f64, f64) {
+        let mut rng = Rng::new(seed);
+        let settings = RlsSettings::<f64>::default();
+        let mut a: Rls<f64, N> = Rls::new(settings);
+        let mut b: Rls<f32, N> = Rls::new(settings.cast());
+        let mut x_true = [0.0; N];
+        for x in x_true.iter_mut() {
+            *x = rng.uni();
+        }
+        for _ in 0..3000 {
+            a.begin_sample();
+            b.begin_sample();
+            for _ in 0..2 {
+                let mut phi = [0.0; N];
+                for p in phi.iter_mut() {
+                    *p = rng.uni();
+                }
+                // round the inputs first so both filters see identical data
+                let phi32: [f32; N] = cast_vec(&phi);
+                let phi: [f64; N] = cast_vec(&phi32.map(f64::from));
+                let y = (phi.iter().zip(&x_true).map(|(p, x)| p * x).sum::<f64>()
+                    + 0.1 * rng.gauss()) as f32;
+                assert!(a.update(&phi, y as f64).is_applied());
+                assert!(b.update(&phi32, y).is_applied());
+            }
+        }
+        let xa = a.estimate();
+        let xb = b.estimate().map(f64::from);
+        let mut d = [0.0; N];
+        for i in 0..N {
+            d[i] = xa[i] - xb[i];
+        }
+        let tr_rel = (a.trace() - b.trace().to_f64()).abs() / a.trace();
+        (norm(&d) / norm(&xa), tr_rel)
+    }
+
+    #[test]
+    fn f32_and_f64_agree_on_well_conditioned_data() {
+        let (e8, t8) = f32_vs_f64::<8>(3);
+        let (e6, t6) = f32_vs_f64::<6>(4);
+        std::println!("f32 vs f64: N=8 x {e8:.2e} trace {t8:.2e}; N=6 x {e6:.2e} trace {t6:.2e}");
+        assert!(e8 < 1e-4 && e6 < 1e-4);
+        assert!(t8 < 1e-4 && t6 < 1e-4);
+    }
+
+    /// Excite for 2000 samples, then idle for 10 000 samples (20 s). `idle_row` makes the
+    /// idle rows. Returns (converged trace, max trace during idle, final trace, stats).
+    fn windup_run<T: Real>(
+        trace_max: f64,
+        idle_row: fn(&mut Rng) -> [f64; 6],
+    ) -> (f64, f64, f64, RlsStats) {
+        let lambda = 0.999;
+        let mut rng = Rng::new(99);
+        let settings = RlsSettings::new(
+            T::from_f64(lambda),
+            T::from_f64(1.0),
+            T::from_f64(trace_max),
+        )
+        .unwrap();
+        let mut rls: Rls<T, 6> = Rls::new(settings);
+        let x_true = [0.1, -0.2, 0.3, -0.1, 0.05, 0.2];
+        let step = |rls: &mut Rls<T, 6>, phi: [f64; 6], rng: &mut Rng| {
+            let y = phi.iter().zip(&x_true).map(|(a, b)| a * b).sum::<f64>() + 0.01 * rng.gauss();
+            rls.begin_sample();
+            assert!(rls.update(&cast_vec(&phi), T::from_f64(y)).is_applied());
+        };
+        for _ in 0..2000 {
+            let mut phi = [0.0; 6];
+            for p in phi.iter_mut() {
+                *p = rng.uni();
+            }
+            step(&mut rls, phi, &mut rng);
+        }
+        let tr_conv = rls.trace().to_f64();
+        let mut tr_idle_max: f64 = 0.0;
+        for _ in 0..10_000 {
+            let phi = idle_row(&mut rng);
+            step(&mut rls, phi, &mut rng);
+            tr_idle_max = tr_idle_max.max(rls.trace().to_f64());
+        }
+        (tr_conv, tr_idle_max, rls.trace().to_f64(), rls.stats())
+    }
+
+    fn zero_row(_: &mut Rng) -> [f64; 6] {
+        [0.0; 6]
+    }
+
+    fn one_dim_row(rng: &mut Rng) -> [f64; 6] {
+        let c = rng.gauss();
+        [0.5 * c, -0.3 * c, 0.2 * c, 0.1 * c, -0.6 * c, 0.4 * c]
+    }
+
+    fn check_trace_bound<T: Real>() {
+        for (name, idle) in [
+            ("zero rows", zero_row as fn(&mut Rng) -> [f64; 6]),
+            ("1-D rows", one_dim_row),
+        ] {
+            let (tr_conv, _, tr_free_end, free_stats) = windup_run::<T>(f64::INFINITY, idle);
+            let trace_max = 10.0 * tr_conv;
+            let (_, tr_idle_max, tr_end, stats) = windup_run::<T>(trace_max, idle);
+            std::println!(
+                "{} {name}: converged {tr_conv:.3e}; unbounded end {tr_free_end:.3e} (×{:.1e}); \
+                 bounded max {tr_idle_max:.3e} (bound/λ {:.3e}), end {tr_end:.3e}, skipped {}",
+                T::NAME,
+                tr_free_end / tr_conv,
+                trace_max / 0.999,
+                stats.forgetting_skipped
+            );
+            assert_eq!(free_stats.forgetting_skipped, 0);
+            assert!(
+                tr_free_end > 1e3 * tr_conv,
+                "{name}: unbounded trace did not wind up"
+            );
+            assert!(
+                tr_idle_max <= trace_max / 0.999 * (1.0 + 1e-5),
+                "{name}: bound violated"
+            );
+            assert!(stats.forgetting_skipped > 1000);
+        }
+    }
+
+    #[test]
+    fn trace_bound_prevents_windup_f64() {
+        check_trace_bound::<f64>();
+    }
+
+    #[test]
+    fn trace_bound_prevents_windup_f32() {
+        check_trace_bound::<f32>();
+    }
+
+    #[test]
+    fn forgetting_skipped_when_trace_would_overflow() {
+        let s = RlsSettings::new(0.5f32, 1e37, f32::INFINITY).unwrap();
+        let mut rls: Rls<f32, 2> = Rls::new(s);
+        // trace 2e37 → 4e37 → 8e37 → 1.6e38 → 3.2e38 (all finite: 4 applications); the
+        // next doubling (6.4e38) would overflow f32 and must be skipped.
+        let mut applied = 0;
+        for _ in 0..10 {
+            if rls.begin_sample() {
+                applied += 1;
+            }
+            assert!(rls.trace().is_finite() && rls.min_d().is_finite());
+        }
+        assert_eq!(applied, 4);
+        assert_eq!(rls.stats().forgetting_skipped, 6);
+    }
+
+    fn sample_filter() -> Rls<f32, 4> {
+        let mut rls: Rls<f32, 4> = Rls::new(RlsSettings::default());
+        let mut rng = Rng::new(1);
+        for _ in 0..50 {
+            rls.begin_sample();
+            let phi = [
+                rng.uni() as f32,
+                rng.uni() as f32,
+                rng.uni() as f32,
+                rng.uni() as f32,
+            ];
+            rls.update(&phi, rng.uni() as f32);
+        }
+        rls
+    }
+
+    #[test]
+    fn non_finite_input_leaves_state_untouched() {
+        let mut rls = sample_filter();
+        let before = rls.clone();
+        let mut rejected = 0;
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for i in 0..4 {
+                let mut phi = [0.1f32, 0.2, -0.3, 0.4];
+                phi[i] = bad;
+                let inn = rls.update(&phi, 1.0);
+                assert_eq!(inn.status, UpdateStatus::NonFiniteInput);
+                assert!(!inn.is_applied());
+                assert_eq!((inn.e, inn.s, inn.normalized_sq()), (0.0, 1.0, 0.0));
+                rejected += 1;
+            }
+            let inn = rls.update(&[0.1, 0.2, -0.3, 0.4], bad);
+            assert_eq!(inn.status, UpdateStatus::NonFiniteInput);
+            rejected += 1;
+        }
+        // finite but overflowing: s = 1 + φᵀPφ = +∞ in f32
+        let inn = rls.update(&[1e30, 0.0, 0.0, 0.0], 1.0);
+        assert_eq!(inn.status, UpdateStatus::NumericalFault);
+        rejected += 1;
+        assert!(!rls.set_estimate([0.0, f32::NAN, 0.0, 0.0]));
+        assert!(!rls.set_estimate([0.0, 0.0, f32::INFINITY, 0.0]));
+
+        let (u0, d0) = before.factors();
+        let (u1, d1) = rls.factors();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&before.estimate()), bits(&rls.estimate()));
+        assert_eq!(bits(&d0), bits(&d1));
+        assert_eq!(bits(u0.as_flattened()), bits(u1.as_flattened()));
+        let st = rls.stats();
+        assert_eq!(st.skipped_non_finite, rejected);
+        assert_eq!(st.updates, before.stats().updates);
+        assert_eq!(
+            RlsStats {
+                skipped_non_finite: 0,
+                ..st
+            },
+            before.stats()
+        );
+    }
+
+    #[test]
+    fn reset_sets_p_identity_and_keeps_estimate() {
+        let mut rls = sample_filter();
+        let x = rls.estimate();
+        let off_diag_before = rls.covariance()[0][1];
+        assert!(off_diag_before != 0.0);
+        rls.reset_covariance(2.5);
+        let p = rls.covariance();
+        for i in 0..4 {
+            for j in 0..4 {
+                assert_eq!(p[i][j], if i == j { 2.5 } else { 0.0 });
+            }
+        }
+        assert_eq!(rls.estimate(), x);
+        assert_eq!(rls.trace(), 10.0);
+        assert_eq!(rls.stats().resets, 1);
+        // invalid p falls back to p0
+        for bad in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
+            rls.reset_covariance(bad);
+            assert_eq!(rls.min_d(), 1e4);
+        }
+        assert_eq!(rls.stats().resets, 5);
+        assert!(rls.set_estimate([1.0, 2.0, 3.0, 4.0]));
+        assert_eq!(rls.estimate(), [1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(rls.min_d(), 1e4);
+    }
+
+    #[test]
+    fn d_floor_clamps_underflow_and_counts() {
+        let mut rls: Rls<f32, 3> = Rls::new(RlsSettings::default());
+        // D0 = 1e4, f0 = 1e16: α = 1 + 1e36, new D0 = 1e4/1e36 = 1e-32 < D_FLOOR
+        let inn = rls.update(&[1e16, 0.0, 0.0], 1.0);
+        assert!(inn.is_applied());
+        assert_eq!(rls.stats().d_floor_hits, 1);
+        assert_eq!(rls.min_d(), D_FLOOR as f32);
+        assert!(rls.estimate().iter().all(|v| v.is_finite()));
+        // the filter keeps working afterwards
+        let inn = rls.update(&[0.0, 1.0, 0.0], 1.0);
+        assert!(inn.is_applied() && rls.min_d() > 0.0);
+    }
+
+    #[test]
+    fn set_trace_max_takes_effect_and_rejects_invalid() {
+        let mut rls: Rls<f64, 2> = Rls::new(unbounded(0.5, 1.0));
+        assert!(rls.begin_sample()); // trace 2 < ∞
+        assert!(rls.set_trace_max(3.0));
+        assert_eq!(rls.settings().trace_max, 3.0);
+        assert!(!rls.begin_sample()); // trace 4 ≥ 3: skipped
+        assert_eq!(rls.trace(), 4.0);
+        for bad in [f64::NAN, 0.0, -1.0] {
+            assert!(!rls.set_trace_max(bad));
+            assert_eq!(rls.settings().trace_max, 3.0);
+        }
+        assert!(rls.set_trace_max(f64::INFINITY));
+        assert!(rls.begin_sample());
+        assert_eq!(rls.stats().forgetting_skipped, 1);
+    }
+
+    #[test]
+    fn lambda_one_is_growing_memory() {
+        let mut rls: Rls<f64, 2> = Rls::new(unbounded(1.0, 3.0));
+        assert!(rls.begin_sample());
+        assert_eq!(rls.trace(), 6.0);
+        assert_eq!(rls.stats().forgetting_skipped, 0);
+    }
+
+    #[test]
+    fn settings_validation_names_the_field() {
+        assert_eq!(RlsSettings::<f32>::default().validate(), Ok(()));
+        assert_eq!(RlsSettings::<f64>::default().validate(), Ok(()));
+        let ok = RlsSettings::new(1.0f64, 1.0, f64::INFINITY);
+        assert!(ok.is_ok());
+        for lam in [0.0, -0.5, 1.0001, f64::NAN, f64::INFINITY] {
+            let e = RlsSettings::new(lam, 1e4, 1e5).unwrap_err();
+            assert_eq!(e, RlsSettingsError::Forgetting);
+            assert_eq!(e.field(), "forgetting");
+        }
+        for p0 in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(RlsSettings::new(0.999, p0, 1e5).unwrap_err().field(), "p0");
+        }
+        for tm in [0.0, -1.0, f64::NAN] {
+            assert_eq!(
+                RlsSettings::new(0.999, 1e4, tm).unwrap_err().field(),
+                "trace_max"
+            );
+        }
+        let msg = std::format!("{}", RlsSettings::new(0.999, f64::NAN, 1e5).unwrap_err());
+        assert!(msg.contains("`p0`"), "{msg}");
+        let bad = RlsSettings {
+            forgetting: 2.0f32,
+            ..RlsSettings::default()
+        };
+        assert_eq!(
+            Rls::<f32, 8>::try_new(bad).unwrap_err(),
+            RlsSettingsError::Forgetting
+        );
+    }
+
+    #[test]
+    fn compensated_innovation_beats_naive_f32() {
+        // y − φᵀx with heavy cancellation: terms of size ~1e3 cancel to ~1e-4.
+        let mut rng = Rng::new(2024);
+        let (mut worst_comp, mut worst_naive) = (0.0f64, 0.0f64);
+        for _ in 0..200 {
+            let mut phi = [0.0f32; 8];
+            let mut x = [0.0f32; 8];
+            for i in 0..8 {
+                phi[i] = (1e3 * rng.uni()) as f32;
+                x[i] = rng.uni() as f32;
+            }
+            // y close to φᵀx (exact value of the f32 products, summed in f64)
+            let exact_dot: f64 = phi.iter().zip(&x).map(|(&a, &b)| a as f64 * b as f64).sum();
+            let y = (exact_dot + 1e-4 * rng.uni()) as f32;
+            // reference: every f32·f32 product is exact in f64; the f64 sum of 9 terms
+            // is accurate to ~1e-13 absolute here.
+            let r_ref = y as f64 - exact_dot;
+            let r_comp = residual(y, &phi, &x) as f64;
+            let r_naive = (y - phi.iter().zip(&x).map(|(a, b)| a * b).sum::<f32>()) as f64;
+            worst_comp = worst_comp.max((r_comp - r_ref).abs());
+            worst_naive = worst_naive.max((r_naive - r_ref).abs());
+        }
+        std::println!(
+            "innovation abs error: compensated {worst_comp:.2e}, naive f32 {worst_naive:.2e}"
+        );
+        // |r| ≤ ~1e-4 + rounding of y (~3e-5): one f32 rounding of r is ≤ ~1e-11.
+        assert!(worst_comp < 1e-10, "compensated error {worst_comp:e}");
+        assert!(worst_naive > 1e3 * worst_comp.max(1e-12));
+    }
+
+    #[test]
+    fn precision_probe() {
+        assert!(is_single::<f32>());
+        assert!(!is_single::<f64>());
+    }
+}

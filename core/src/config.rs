@@ -1,0 +1,397 @@
+//! Configuration in SI units, validated once by [`Config::build`].
+//!
+//! Everything a person sets is here, with units in the names (Hz, s, µm, m/s², V).
+//! `build()` checks every field and turns the settings into the runtime estimator
+//! (non-dimensional, coefficients precomputed); it returns a [`ConfigError`] naming the
+//! first bad field. After that, the 500 Hz tick cannot fail.
+
+use crate::estimator::Estimator;
+use crate::physics::{Physical, TABLE2};
+use crate::real::Real;
+use core::fmt;
+
+/// ω0 of the paper's Table 2: γ = 3.8581e-5 ⇔ 150 °/s gives ω0 = 2.618/3.8581e-5 rad/s.
+pub const TABLE2_OMEGA0_RAD_S: f64 = 2.618 / 3.8581e-5;
+
+/// Pump-frequency dither (the excitation that makes all 14 parameters identifiable).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DitherConfig {
+    /// Enabled at start-up (it can be switched at run time).
+    pub enabled: bool,
+    /// Peak deviation of the pump frequency 2Ω/2π, Hz (±1e-3 of ω0 on Ω ⇔ ±21.6 Hz).
+    pub pump_hz: f64,
+    /// Dither frequency, Hz (2–5 Hz, FINDINGS §3.3).
+    pub freq_hz: f64,
+    /// Time after start-up at which the dither begins, s.
+    pub start_s: f64,
+    /// Raised-cosine taper of the dither amplitude when it is switched on or off, s.
+    pub taper_s: f64,
+}
+
+/// Recursive least squares settings (both axes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RlsConfig {
+    /// Forgetting factor per 500 Hz sample (0.999 ⇔ 2 s memory).
+    pub forgetting: f64,
+    /// Initial covariance, in column-scaled units (relative variance of each θ).
+    pub p0: f64,
+    /// Covariance after a detected parameter change, scaled units.
+    pub p_reset: f64,
+    /// Anti-windup: forgetting stops while trace(P) exceeds this factor times the trace
+    /// at the moment the estimate first settled (FINDINGS §4: 10×).
+    pub trace_bound_factor: f64,
+}
+
+/// Input validation, gating and the change detector.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MonitorConfig {
+    /// No RLS updates for this long after start-up (the start-up transient biases the
+    /// rows, FINDINGS §3.2), s.
+    pub gate_startup_s: f64,
+    /// No RLS updates for this long after a commanded pump jump, s (FINDINGS §3.5).
+    pub gate_jump_s: f64,
+    /// No RLS updates for this long after a bad input sample (the filters saw held
+    /// values), s.
+    pub bad_input_gate_s: f64,
+    /// Change-detector threshold on the EWMA of the normalised squared innovations
+    /// summed over one sample's rows (nominal level ≈ 5), FINDINGS §5: 1e3.
+    pub change_threshold: f64,
+    /// EWMA weight of the change detector per sample.
+    pub change_alpha: f64,
+    /// Minimum time between two covariance resets on one axis, s.
+    pub change_hold_s: f64,
+    /// Lock-in full scale: a channel at or beyond ±this is saturated, µm.
+    pub full_scale_um: f64,
+    /// Accelerometer full scale, m/s².
+    pub accel_full_scale_mps2: f64,
+    /// A lock-in channel that repeats the same value this many samples is stuck
+    /// (0 disables; real data always carries noise).
+    pub stuck_samples: u32,
+    /// Excitation is sufficient when the rms of the filtered pump-frequency deviation
+    /// is at least this fraction of the configured dither's rms.
+    pub excitation_min_fraction: f64,
+}
+
+/// The retune supervisor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RetuneConfig {
+    /// Retune allowed at start-up (switchable at run time).
+    pub enabled: bool,
+    /// Duration of the raised-cosine ramp of the pump centre, s.
+    pub ramp_s: f64,
+    /// Largest rate of the pump-centre ramp, Hz/s (the ramp is made longer if needed).
+    pub max_rate_hz_per_s: f64,
+    /// No retune for a pump-centre move smaller than this, Hz.
+    pub deadband_hz: f64,
+    /// The target stays this fraction of the drive's parametric band inside its edges.
+    pub band_margin: f64,
+    /// The estimate is settled when ω̂y² moved less than `settle_tol` (relative) over
+    /// this window, s.
+    pub settle_window_s: f64,
+    /// Relative tolerance of the settle test.
+    pub settle_tol: f64,
+    /// Drive lock: |A1| at or above this, µm.
+    pub lock_min_um: f64,
+    /// Drive lock is lost after |A1| stayed below `lock_min_um` this long, s.
+    pub lock_lost_s: f64,
+    /// Minimum time between the end of one retune and the start of the next, s.
+    pub min_interval_s: f64,
+}
+
+/// The whole configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// Drive natural frequency that defines ω0 = 2π·f0 (the paper's time unit), Hz.
+    pub f0_hz: f64,
+    /// Sample rate of the lock-in outputs, Hz.
+    pub fs_hz: f64,
+    /// Length unit L0 of the non-dimensional model, µm (1 in the paper).
+    pub l0_um: f64,
+    /// Order of the lock-in's analog Butterworth low-pass.
+    pub lockin_lpf_order: usize,
+    /// Cut-off of the lock-in low-pass, Hz.
+    pub lockin_lpf_hz: f64,
+    /// Pump voltage amplitude V_A0 at which the nominal θ hold, V.
+    pub pump_amp_ref_v: f64,
+    /// Design (nominal) physical parameters, non-dimensional; the RLS runs on
+    /// deviations from the θ they give, with columns scaled by |θ_nom|.
+    pub nominal: Physical,
+    /// Initial pump centre frequency 2Ω/2π, Hz.
+    pub pump_centre_hz: f64,
+    /// Pump-frequency dither.
+    pub dither: DitherConfig,
+    /// Corner of the slow state-variable filter, Hz (DERIVATION §4: 10 Hz, ζ = 1).
+    pub svf_hz: f64,
+    /// Displacement noise density of the front end, pm/√Hz; rows are weighted to unit
+    /// noise by `row_sigma_* × noise_pm_rthz`.
+    pub noise_pm_rthz: f64,
+    /// Residual standard deviation of the drive rows per 1 pm/√Hz, non-dimensional, in
+    /// row order (DC, 1st harmonic Re, Im, 3rd harmonic Re, Im).
+    pub row_sigma_drive: [f64; 5],
+    /// Same for the sense rows.
+    pub row_sigma_sense: [f64; 5],
+    /// RLS settings.
+    pub rls: RlsConfig,
+    /// Validation, gating and change detection.
+    pub monitor: MonitorConfig,
+    /// Retune supervisor.
+    pub retune: RetuneConfig,
+}
+
+impl Config {
+    /// The paper's gyro (Table 2), 1 pm/√Hz front end, the recommended scheme of
+    /// FINDINGS §6. The nominal parameters are Table 2 with zero rate.
+    pub fn table2() -> Self {
+        let f0_hz = TABLE2_OMEGA0_RAD_S / (2.0 * core::f64::consts::PI);
+        let mut nominal = TABLE2;
+        nominal.gamma = 0.0;
+        Config {
+            f0_hz,
+            fs_hz: 500.0,
+            l0_um: 1.0,
+            lockin_lpf_order: 4,
+            lockin_lpf_hz: 150.0,
+            pump_amp_ref_v: 1.0,
+            nominal,
+            pump_centre_hz: 2.0 * libm::sqrt(TABLE2.wy2) * f0_hz,
+            dither: DitherConfig {
+                enabled: true,
+                pump_hz: 2.0e-3 * f0_hz,
+                freq_hz: 2.0,
+                start_s: 1.0,
+                taper_s: 0.1,
+            },
+            svf_hz: 10.0,
+            noise_pm_rthz: 1.0,
+            row_sigma_drive: DEFAULT_ROW_SIGMA_DRIVE,
+            row_sigma_sense: DEFAULT_ROW_SIGMA_SENSE,
+            rls: RlsConfig {
+                forgetting: 0.999,
+                p0: 1e4,
+                p_reset: 1.0,
+                trace_bound_factor: 10.0,
+            },
+            monitor: MonitorConfig {
+                gate_startup_s: 0.5,
+                gate_jump_s: 0.5,
+                bad_input_gate_s: 0.2,
+                change_threshold: 1e3,
+                change_alpha: 0.05,
+                change_hold_s: 0.05,
+                full_scale_um: 20.0,
+                accel_full_scale_mps2: 400.0,
+                stuck_samples: 50,
+                excitation_min_fraction: 0.5,
+            },
+            retune: RetuneConfig {
+                enabled: true,
+                ramp_s: 0.5,
+                max_rate_hz_per_s: 200.0,
+                deadband_hz: 2.0,
+                band_margin: 0.1,
+                settle_window_s: 0.5,
+                settle_tol: 2e-5,
+                lock_min_um: 0.2,
+                lock_lost_s: 0.05,
+                min_interval_s: 1.0,
+            },
+        }
+    }
+
+    /// ω0 = 2π f0, rad/s.
+    pub fn omega0_rad_s(&self) -> f64 {
+        2.0 * core::f64::consts::PI * self.f0_hz
+    }
+
+    /// Checks every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        use ConfigError as E;
+        let pos = |v: f64, f: &'static str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(E::new(f, "must be finite and > 0"))
+            }
+        };
+        let nonneg = |v: f64, f: &'static str| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(E::new(f, "must be finite and >= 0"))
+            }
+        };
+        pos(self.f0_hz, "f0_hz")?;
+        pos(self.fs_hz, "fs_hz")?;
+        if self.fs_hz >= self.f0_hz {
+            return Err(E::new("fs_hz", "must be well below the carrier f0_hz"));
+        }
+        pos(self.l0_um, "l0_um")?;
+        if !(1..=crate::lpf::MAX_ORDER).contains(&self.lockin_lpf_order) {
+            return Err(E::new("lockin_lpf_order", "must be 1..=8"));
+        }
+        pos(self.lockin_lpf_hz, "lockin_lpf_hz")?;
+        if self.lockin_lpf_hz >= self.f0_hz {
+            return Err(E::new("lockin_lpf_hz", "must be below the carrier f0_hz"));
+        }
+        pos(self.pump_amp_ref_v, "pump_amp_ref_v")?;
+        let n = &self.nominal;
+        for (v, f) in [
+            (n.mu_x, "nominal.mu_x"),
+            (n.mu_y, "nominal.mu_y"),
+            (n.wx2, "nominal.wx2"),
+            (n.wy2, "nominal.wy2"),
+            (n.beta1, "nominal.beta1"),
+        ] {
+            pos(v, f)?;
+        }
+        for (v, f) in [
+            (n.mu_xy, "nominal.mu_xy"),
+            (n.wxy2, "nominal.wxy2"),
+            (n.alpha_x, "nominal.alpha_x"),
+            (n.alpha_y, "nominal.alpha_y"),
+            (n.beta3, "nominal.beta3"),
+            (n.gamma, "nominal.gamma"),
+            (n.gamma_p, "nominal.gamma_p"),
+            (n.c_ax, "nominal.c_ax"),
+            (n.c_ay, "nominal.c_ay"),
+        ] {
+            if !v.is_finite() {
+                return Err(E::new(f, "must be finite"));
+            }
+        }
+        // every nominal θ must be non-zero: columns are scaled by |θ_nom|
+        let (t1, t2) = crate::physics::theta_from_physical(n);
+        if t1
+            .iter()
+            .chain(t2.iter())
+            .any(|v| *v == 0.0 || !v.is_finite())
+        {
+            return Err(E::new(
+                "nominal",
+                "gives a zero θ component (columns are scaled by |θ_nom|): make mu_xy, wxy2, alpha_*, beta3 non-zero",
+            ));
+        }
+        pos(self.pump_centre_hz, "pump_centre_hz")?;
+        let d = &self.dither;
+        nonneg(d.pump_hz, "dither.pump_hz")?;
+        if d.pump_hz >= 0.05 * self.pump_centre_hz {
+            return Err(E::new(
+                "dither.pump_hz",
+                "must be below 5 % of the pump centre",
+            ));
+        }
+        pos(d.freq_hz, "dither.freq_hz")?;
+        if d.freq_hz > self.fs_hz / 20.0 {
+            return Err(E::new("dither.freq_hz", "must be slow: at most fs_hz/20"));
+        }
+        nonneg(d.start_s, "dither.start_s")?;
+        nonneg(d.taper_s, "dither.taper_s")?;
+        pos(self.svf_hz, "svf_hz")?;
+        if self.svf_hz > self.fs_hz / 10.0 {
+            return Err(E::new("svf_hz", "must be at most fs_hz/10"));
+        }
+        pos(self.noise_pm_rthz, "noise_pm_rthz")?;
+        for (i, v) in self.row_sigma_drive.iter().enumerate() {
+            pos(
+                *v,
+                [
+                    "row_sigma_drive[0]",
+                    "row_sigma_drive[1]",
+                    "row_sigma_drive[2]",
+                    "row_sigma_drive[3]",
+                    "row_sigma_drive[4]",
+                ][i],
+            )?;
+        }
+        for (i, v) in self.row_sigma_sense.iter().enumerate() {
+            pos(
+                *v,
+                [
+                    "row_sigma_sense[0]",
+                    "row_sigma_sense[1]",
+                    "row_sigma_sense[2]",
+                    "row_sigma_sense[3]",
+                    "row_sigma_sense[4]",
+                ][i],
+            )?;
+        }
+        let r = &self.rls;
+        if !(r.forgetting > 0.0 && r.forgetting <= 1.0) {
+            return Err(E::new("rls.forgetting", "must be in (0, 1]"));
+        }
+        pos(r.p0, "rls.p0")?;
+        pos(r.p_reset, "rls.p_reset")?;
+        if !(r.trace_bound_factor.is_finite() && r.trace_bound_factor >= 1.0) {
+            return Err(E::new("rls.trace_bound_factor", "must be finite and >= 1"));
+        }
+        let m = &self.monitor;
+        nonneg(m.gate_startup_s, "monitor.gate_startup_s")?;
+        nonneg(m.gate_jump_s, "monitor.gate_jump_s")?;
+        nonneg(m.bad_input_gate_s, "monitor.bad_input_gate_s")?;
+        pos(m.change_threshold, "monitor.change_threshold")?;
+        if !(m.change_alpha > 0.0 && m.change_alpha <= 1.0) {
+            return Err(E::new("monitor.change_alpha", "must be in (0, 1]"));
+        }
+        nonneg(m.change_hold_s, "monitor.change_hold_s")?;
+        pos(m.full_scale_um, "monitor.full_scale_um")?;
+        pos(m.accel_full_scale_mps2, "monitor.accel_full_scale_mps2")?;
+        nonneg(m.excitation_min_fraction, "monitor.excitation_min_fraction")?;
+        let t = &self.retune;
+        pos(t.ramp_s, "retune.ramp_s")?;
+        pos(t.max_rate_hz_per_s, "retune.max_rate_hz_per_s")?;
+        nonneg(t.deadband_hz, "retune.deadband_hz")?;
+        if !(t.band_margin >= 0.0 && t.band_margin < 0.5) {
+            return Err(E::new("retune.band_margin", "must be in [0, 0.5)"));
+        }
+        pos(t.settle_window_s, "retune.settle_window_s")?;
+        pos(t.settle_tol, "retune.settle_tol")?;
+        nonneg(t.lock_min_um, "retune.lock_min_um")?;
+        nonneg(t.lock_lost_s, "retune.lock_lost_s")?;
+        nonneg(t.min_interval_s, "retune.min_interval_s")?;
+        Ok(())
+    }
+
+    /// Validates and builds the runtime estimator in precision `T`.
+    pub fn build<T: Real>(&self) -> Result<Estimator<T>, ConfigError> {
+        self.validate()?;
+        Ok(Estimator::from_valid_config(self))
+    }
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self::table2()
+    }
+}
+
+/// Residual std of the drive rows at 1 pm/√Hz (DC, h1 Re, h1 Im, h3 Re, h3 Im),
+/// measured on the simulator's `identify` scenario with the true θ
+/// (`paragyro-sim calibrate`).
+pub const DEFAULT_ROW_SIGMA_DRIVE: [f64; 5] = [2.67e-6, 1.72e-7, 8.7e-8, 3.06e-5, 3.13e-5];
+/// Same for the sense rows.
+pub const DEFAULT_ROW_SIGMA_SENSE: [f64; 5] = [2.81e-6, 3.0e-8, 4.6e-8, 3.1e-5, 3.0e-5];
+
+/// A configuration field that failed validation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConfigError {
+    /// The field, as written in [`Config`] (e.g. `"rls.forgetting"`).
+    pub field: &'static str,
+    /// What is wrong with it.
+    pub reason: &'static str,
+}
+
+impl ConfigError {
+    const fn new(field: &'static str, reason: &'static str) -> Self {
+        ConfigError { field, reason }
+    }
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "invalid configuration field `{}`: {}",
+            self.field, self.reason
+        )
+    }
+}

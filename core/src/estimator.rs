@@ -1,0 +1,757 @@
+//! The one `step()` per 500 Hz sample that ties the chain together:
+//!
+//! ```text
+//! sample ─► check ─► replica LPF (ω, ω², ω′, s, ã) ─► projections ─► SVF bank ─► rows (5+5)
+//!        ─► gate ─► Bierman UD RLS 8×8 + 6×6 ─► change detector ─► θ̂, ω̂y², γ̂, health
+//!        ─► retune supervisor ─► pump scheduler (centre + dither) ─► next pump command
+//! ```
+//!
+//! `step()` never fails, never panics and never allocates: bad input is flagged,
+//! counted and skipped, and the estimate is held.
+
+use crate::complex::Cplx;
+use crate::config::Config;
+use crate::excitation::Scheduler;
+use crate::lpf::{ReplicaChannel, ReplicaCoeffs};
+use crate::monitor::{
+    ChangeDetector, ExcitationMeter, InputCheck, N_LOCKIN_CH, SettleTest, StuckDetector,
+};
+use crate::physics::{Physical, physical_from_theta, rate_dps_from_gamma, theta_from_physical};
+use crate::real::Real;
+use crate::retune::{RetuneAction, RetuneInputs, Supervisor, SupervisorSettings, drive_band};
+use crate::rls::{Rls, RlsSettings};
+use crate::rows::{Envelopes, Known, NROWS, NominalConsts, RowBuilder, RowSet};
+
+/// Lock-in outputs of one sample, in µm (peak complex amplitudes against e^{−ikψ}).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lockin<T> {
+    /// Low-passed DC level of the drive displacement, µm.
+    pub x0_um: T,
+    /// Drive harmonics 1, 2, 3 (complex amplitude), µm.
+    pub x_um: [Cplx<T>; 3],
+    /// DC level of the sense displacement, µm.
+    pub y0_um: T,
+    /// Sense harmonics 1, 2, 3, µm.
+    pub y_um: [Cplx<T>; 3],
+}
+
+impl<T: Real> Lockin<T> {
+    /// From a front end that reports amplitude and phase (rad) per harmonic:
+    /// `amp·e^{i·phase}`.
+    pub fn from_polar(
+        x0_um: T,
+        x_amp_um: [T; 3],
+        x_phase_rad: [T; 3],
+        y0_um: T,
+        y_amp_um: [T; 3],
+        y_phase_rad: [T; 3],
+    ) -> Self {
+        let p = |a: T, ph: T| {
+            let ph = ph.to_f64();
+            Cplx::new(
+                a * T::from_f64(libm::cos(ph)),
+                a * T::from_f64(libm::sin(ph)),
+            )
+        };
+        Lockin {
+            x0_um,
+            x_um: [
+                p(x_amp_um[0], x_phase_rad[0]),
+                p(x_amp_um[1], x_phase_rad[1]),
+                p(x_amp_um[2], x_phase_rad[2]),
+            ],
+            y0_um,
+            y_um: [
+                p(y_amp_um[0], y_phase_rad[0]),
+                p(y_amp_um[1], y_phase_rad[1]),
+                p(y_amp_um[2], y_phase_rad[2]),
+            ],
+        }
+    }
+
+    fn channels(&self) -> [T; N_LOCKIN_CH] {
+        let mut c = [T::ZERO; N_LOCKIN_CH];
+        c[0] = self.x0_um;
+        c[7] = self.y0_um;
+        for i in 0..3 {
+            c[1 + 2 * i] = self.x_um[i].re;
+            c[2 + 2 * i] = self.x_um[i].im;
+            c[8 + 2 * i] = self.y_um[i].re;
+            c[9 + 2 * i] = self.y_um[i].im;
+        }
+        c
+    }
+}
+
+/// Everything the core needs at one 500 Hz sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sample<T> {
+    /// Lock-in outputs at the sample instant.
+    pub lockin: Lockin<T>,
+    /// Accelerometer (x = drive axis, y = sense axis), m/s².
+    pub accel_mps2: [T; 2],
+    /// Pump frequency 2Ω/2π in effect at the sample instant, Hz (f64: 1e-7 relative
+    /// matters here).
+    pub pump_hz: f64,
+    /// Pump voltage scale s = (V_A/V_A0)².
+    pub pump_scale: T,
+}
+
+impl<T: Real> Sample<T> {
+    /// s = (V_A/V_A0)² from the pump voltage amplitude and its reference.
+    pub fn pump_scale_from_volts(v: f64, v_ref: f64) -> T {
+        T::from_f64((v / v_ref) * (v / v_ref))
+    }
+}
+
+/// Health of the estimate (bit order as in [`Health::bits`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Health {
+    /// This sample's inputs were valid.
+    pub inputs_valid: bool,
+    /// The pump-frequency excitation is sufficient for identification.
+    pub excitation_ok: bool,
+    /// Both covariances are finite, positive definite and bounded.
+    pub covariance_bounded: bool,
+    /// A parameter change was detected and the estimate has not settled since.
+    pub change_detected: bool,
+    /// The drive oscillates (|A1| above the lock threshold).
+    pub drive_locked: bool,
+    /// ω̂y² is settled.
+    pub settled: bool,
+    /// RLS updates are gated (start-up, commanded jump, recovery from bad input).
+    pub gated: bool,
+    /// A retune ramp of the pump centre is in progress.
+    pub retuning: bool,
+}
+
+impl Health {
+    /// Bits: 0 inputs_valid, 1 excitation_ok, 2 covariance_bounded, 3 change_detected,
+    /// 4 drive_locked, 5 settled, 6 gated, 7 retuning.
+    pub fn bits(&self) -> u32 {
+        [
+            self.inputs_valid,
+            self.excitation_ok,
+            self.covariance_bounded,
+            self.change_detected,
+            self.drive_locked,
+            self.settled,
+            self.gated,
+            self.retuning,
+        ]
+        .iter()
+        .enumerate()
+        .fold(0, |acc, (i, b)| acc | ((*b as u32) << i))
+    }
+
+    /// Good enough to act on (retune): valid, excited, bounded, no change pending,
+    /// locked, settled, not gated.
+    pub fn actionable(&self) -> bool {
+        self.inputs_valid
+            && self.excitation_ok
+            && self.covariance_bounded
+            && !self.change_detected
+            && self.drive_locked
+            && self.settled
+            && !self.gated
+    }
+}
+
+/// Counters since start-up.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Samples seen.
+    pub samples: u32,
+    /// Samples used for RLS updates.
+    pub updates: u32,
+    /// Samples flagged as bad and skipped.
+    pub bad_samples: u32,
+    /// … because of a NaN or infinite value.
+    pub non_finite: u32,
+    /// … because a channel was saturated.
+    pub saturated: u32,
+    /// … because a lock-in channel was stuck.
+    pub stuck: u32,
+    /// Covariance resets of the drive RLS by the change detector.
+    pub resets_drive: u32,
+    /// Covariance resets of the sense RLS.
+    pub resets_sense: u32,
+    /// Retunes started.
+    pub retunes: u32,
+    /// Retunes aborted because the drive lock was lost.
+    pub retune_aborts: u32,
+    /// Commanded pump jumps.
+    pub jumps: u32,
+}
+
+/// Event bits of one step.
+pub mod event {
+    /// The drive RLS was reset by the change detector.
+    pub const CHANGE_DRIVE: u8 = 1;
+    /// The sense RLS was reset by the change detector.
+    pub const CHANGE_SENSE: u8 = 2;
+    /// A retune ramp started.
+    pub const RETUNE_START: u8 = 4;
+    /// A retune ramp finished.
+    pub const RETUNE_DONE: u8 = 8;
+    /// A retune was aborted (drive lock lost).
+    pub const RETUNE_ABORT: u8 = 16;
+    /// The sample was bad and skipped.
+    pub const BAD_INPUT: u8 = 32;
+    /// The estimate settled (rising edge).
+    pub const SETTLED: u8 = 64;
+}
+
+/// What one step returns.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepOutput {
+    /// Pump frequency to command for the next sample instant, Hz.
+    pub pump_hz_next: f64,
+    /// Health after this sample.
+    pub health: Health,
+    /// Events of this step (see [`event`]).
+    pub events: u8,
+    /// The RLS was updated with this sample.
+    pub updated: bool,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Replicas<T> {
+    co: ReplicaCoeffs<T>,
+    dom: ReplicaChannel<T>,
+    dom2: ReplicaChannel<T>,
+    ds: ReplicaChannel<T>,
+    ax: ReplicaChannel<T>,
+    ay: ReplicaChannel<T>,
+}
+
+/// The estimator (runtime form of a validated [`Config`]).
+#[derive(Clone, Debug)]
+pub struct Estimator<T: Real> {
+    cfg: Config,
+    // derived constants
+    f0_hz: f64,
+    om_ref: f64,
+    inv_l0: T,
+    accel_nd: T,
+    th1n: [f64; 8],
+    th2n: [f64; 6],
+    sc1: [T; 8],
+    sc2: [T; 6],
+    w1: [T; NROWS],
+    w2: [T; NROWS],
+    gate_startup: u64,
+    gate_jump: u64,
+    gate_bad: u64,
+    dither_rms: f64,
+    // blocks
+    rep: Option<Replicas<T>>,
+    rep_co: ReplicaCoeffs<T>,
+    rows: RowBuilder<T>,
+    last_rows: RowSet<T>,
+    rls1: Rls<T, 8>,
+    rls2: Rls<T, 6>,
+    det1: ChangeDetector,
+    det2: ChangeDetector,
+    stuck: StuckDetector<T>,
+    exc: ExcitationMeter,
+    settle: SettleTest,
+    sched: Scheduler<T>,
+    sup: Supervisor,
+    // state
+    k: u64,
+    jump_gate_until: u64,
+    bad_gate_until: u64,
+    last_reset: u64,
+    change_pending: bool,
+    bound_learned: bool,
+    was_settled: bool,
+    last_good: Option<(Envelopes<T>, [T; 2], f64, T)>,
+    health: Health,
+    counters: Counters,
+    last_drive_amp: f64,
+    last_s: f64,
+}
+
+impl<T: Real> Estimator<T> {
+    /// Builds from a configuration that passed [`Config::validate`] (use
+    /// [`Config::build`]).
+    pub(crate) fn from_valid_config(cfg: &Config) -> Self {
+        let omega0 = cfg.omega0_rad_s();
+        let ts = omega0 / cfg.fs_hz; // sample period in τ
+        let (th1n, th2n) = theta_from_physical(&cfg.nominal);
+        let om_ref = cfg.pump_centre_hz / (2.0 * cfg.f0_hz);
+        let nom = NominalConsts::<T>::new(&th1n, &th2n, om_ref);
+        let w_svf = 2.0 * core::f64::consts::PI * cfg.svf_hz / omega0;
+        let wc = 2.0 * core::f64::consts::PI * cfg.lockin_lpf_hz / omega0;
+        let rep_co = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts);
+        let mut sc1 = [T::ZERO; 8];
+        let mut sc2 = [T::ZERO; 6];
+        for j in 0..8 {
+            sc1[j] = T::from_f64(libm::fabs(th1n[j]));
+        }
+        for j in 0..6 {
+            sc2[j] = T::from_f64(libm::fabs(th2n[j]));
+        }
+        let mut w1 = [T::ZERO; NROWS];
+        let mut w2 = [T::ZERO; NROWS];
+        for r in 0..NROWS {
+            w1[r] = T::from_f64(1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz));
+            w2[r] = T::from_f64(1.0 / (cfg.row_sigma_sense[r] * cfg.noise_pm_rthz));
+        }
+        let samples = |s: f64| libm::round(s * cfg.fs_hz).max(0.0) as u64;
+        let r = &cfg.rls;
+        let set1 = RlsSettings {
+            forgetting: T::from_f64(r.forgetting),
+            p0: T::from_f64(r.p0),
+            trace_max: T::from_f64(r.p0 * 8.0 * 10.0),
+        };
+        let set2 = RlsSettings {
+            forgetting: T::from_f64(r.forgetting),
+            p0: T::from_f64(r.p0),
+            trace_max: T::from_f64(r.p0 * 6.0 * 10.0),
+        };
+        let m = &cfg.monitor;
+        let hold = samples(m.change_hold_s).max(1);
+        let dither_amp = cfg.dither.pump_hz / (2.0 * cfg.f0_hz);
+        let t = &cfg.retune;
+        let sup = Supervisor::new(SupervisorSettings {
+            enabled: t.enabled,
+            ramp_min: samples(t.ramp_s).max(1),
+            max_rate: t.max_rate_hz_per_s / (2.0 * cfg.f0_hz) / cfg.fs_hz,
+            deadband: t.deadband_hz / (2.0 * cfg.f0_hz),
+            margin: t.band_margin,
+            min_interval: samples(t.min_interval_s),
+            lock_min: t.lock_min_um / cfg.l0_um,
+            lock_lost_after: samples(t.lock_lost_s),
+        });
+        let every = 25u64;
+        let need = ((t.settle_window_s * cfg.fs_hz) / every as f64) as usize + 1;
+        Estimator {
+            cfg: *cfg,
+            f0_hz: cfg.f0_hz,
+            om_ref,
+            inv_l0: T::from_f64(1.0 / cfg.l0_um),
+            accel_nd: T::from_f64(1.0 / (cfg.l0_um * 1e-6 * omega0 * omega0)),
+            th1n,
+            th2n,
+            sc1,
+            sc2,
+            w1,
+            w2,
+            gate_startup: samples(m.gate_startup_s),
+            gate_jump: samples(m.gate_jump_s),
+            gate_bad: samples(m.bad_input_gate_s),
+            dither_rms: dither_amp / core::f64::consts::SQRT_2,
+            rep: None,
+            rep_co,
+            rows: RowBuilder::new(w_svf, ts, nom),
+            last_rows: RowSet::default(),
+            rls1: Rls::new(set1),
+            rls2: Rls::new(set2),
+            det1: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
+            det2: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
+            stuck: StuckDetector::new(m.stuck_samples),
+            exc: ExcitationMeter::new(1.0 / (0.5 * cfg.fs_hz)),
+            settle: SettleTest::new(every, need, t.settle_tol),
+            sched: Scheduler::new(
+                om_ref,
+                dither_amp,
+                cfg.dither.freq_hz / cfg.fs_hz,
+                cfg.dither.taper_s * cfg.fs_hz,
+                samples(cfg.dither.start_s),
+                cfg.dither.enabled,
+            ),
+            sup,
+            k: 0,
+            jump_gate_until: 0,
+            bad_gate_until: 0,
+            last_reset: 0,
+            change_pending: false,
+            bound_learned: false,
+            was_settled: false,
+            last_good: None,
+            health: Health::default(),
+            counters: Counters::default(),
+            last_drive_amp: 0.0,
+            last_s: 1.0,
+        }
+    }
+
+    /// The configuration this estimator was built from.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Pump frequency to command before the first sample, Hz.
+    pub fn initial_pump_hz(&self) -> f64 {
+        self.pump_hz_of(self.sched.centre())
+    }
+
+    fn pump_hz_of(&self, dev: f64) -> f64 {
+        2.0 * self.f0_hz * (self.om_ref + dev)
+    }
+
+    /// Current pump centre (without dither), Hz.
+    pub fn pump_centre_hz(&self) -> f64 {
+        self.pump_hz_of(self.sched.centre())
+    }
+
+    /// Commands a new pump centre. `jump = true`: at once, with RLS gating for
+    /// `gate_jump_s` and a covariance reset (FINDINGS §3.5); `false`: a raised-cosine
+    /// ramp of `retune.ramp_s`.
+    pub fn command_pump_centre(&mut self, pump_hz: f64, jump: bool) {
+        if !(pump_hz.is_finite() && pump_hz > 0.0) {
+            return;
+        }
+        let dev = pump_hz / (2.0 * self.f0_hz) - self.om_ref;
+        if jump {
+            self.sched.jump(dev);
+            self.jump_gate_until = self.k + self.gate_jump;
+            let p = T::from_f64(self.cfg.rls.p_reset);
+            self.rls1.reset_covariance(p);
+            self.rls2.reset_covariance(p);
+            self.det1.rearm();
+            self.det2.rearm();
+            self.last_reset = self.k;
+            self.change_pending = true;
+            self.settle.clear();
+            self.counters.jumps += 1;
+        } else {
+            let len = libm::round(self.cfg.retune.ramp_s * self.cfg.fs_hz).max(1.0) as u64;
+            self.sched.ramp_to(dev, self.k, len);
+        }
+    }
+
+    /// Switches the pump-frequency dither on or off (tapered).
+    pub fn set_dither(&mut self, on: bool) {
+        self.sched.set_dither(on);
+    }
+
+    /// Allows or forbids the retune supervisor.
+    pub fn set_retune(&mut self, on: bool) {
+        self.sup.enabled = on;
+    }
+
+    /// Health after the last step.
+    pub fn health(&self) -> Health {
+        self.health
+    }
+
+    /// Counters since start-up.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Samples processed.
+    pub fn samples(&self) -> u64 {
+        self.k
+    }
+
+    /// The nominal θ the RLS linearises about.
+    pub fn nominal_theta(&self) -> ([f64; 8], [f64; 6]) {
+        (self.th1n, self.th2n)
+    }
+
+    /// The current estimate θ̂1 (8), θ̂2 (6) in eq. (25) order.
+    pub fn theta(&self) -> ([f64; 8], [f64; 6]) {
+        let x1 = self.rls1.estimate();
+        let x2 = self.rls2.estimate();
+        let mut t1 = self.th1n;
+        let mut t2 = self.th2n;
+        for j in 0..8 {
+            t1[j] += self.sc1[j].to_f64() * x1[j].to_f64();
+        }
+        for j in 0..6 {
+            t2[j] += self.sc2[j].to_f64() * x2[j].to_f64();
+        }
+        (t1, t2)
+    }
+
+    /// The physical parameters from θ̂ (corrected Table 3).
+    pub fn physical(&self) -> Physical {
+        let (t1, t2) = self.theta();
+        physical_from_theta(&t1, &t2)
+    }
+
+    /// Estimated angular rate, °/s.
+    pub fn rate_dps(&self) -> f64 {
+        rate_dps_from_gamma(self.physical().gamma, self.cfg.omega0_rad_s())
+    }
+
+    /// Estimated ω_y² (non-dimensional).
+    pub fn wy2(&self) -> f64 {
+        let (t1, t2) = self.theta();
+        let g = (t1[3] - t2[3]) / 4.0;
+        -t2[1] + g * g
+    }
+
+    /// Traces of the (column-scaled) covariances (drive, sense).
+    pub fn traces(&self) -> (f64, f64) {
+        (self.rls1.trace().to_f64(), self.rls2.trace().to_f64())
+    }
+
+    /// Change-detector levels (drive, sense).
+    pub fn detector_levels(&self) -> (f64, f64) {
+        (self.det1.level(), self.det2.level())
+    }
+
+    /// The last sample's rows, unweighted and unscaled (`y = z − Φθ_nom`), for
+    /// diagnostics and calibration.
+    pub fn last_rows(&self) -> &RowSet<T> {
+        &self.last_rows
+    }
+
+    /// Row weights (drive, sense) = 1/σ.
+    pub fn row_weights(&self) -> ([T; NROWS], [T; NROWS]) {
+        (self.w1, self.w2)
+    }
+
+    fn check(&mut self, s: &Sample<T>) -> InputCheck {
+        let ch = s.lockin.channels();
+        let mut c = InputCheck::default();
+        let fs = T::from_f64(self.cfg.monitor.full_scale_um);
+        let afs = T::from_f64(self.cfg.monitor.accel_full_scale_mps2);
+        for v in ch.iter() {
+            if !v.is_finite() {
+                c.non_finite = true;
+            } else if v.abs() >= fs {
+                c.saturated = true;
+            }
+        }
+        for v in s.accel_mps2.iter() {
+            if !v.is_finite() {
+                c.non_finite = true;
+            } else if v.abs() >= afs {
+                c.saturated = true;
+            }
+        }
+        if !(s.pump_hz.is_finite()
+            && s.pump_hz > 0.0
+            && s.pump_scale.is_finite()
+            && s.pump_scale >= T::ZERO)
+        {
+            c.non_finite = true;
+        }
+        if !c.non_finite && self.stuck.push(&ch) {
+            c.stuck = true;
+        }
+        c
+    }
+
+    /// Processes one 500 Hz sample. Never fails, never panics, never allocates.
+    pub fn step(&mut self, s: &Sample<T>) -> StepOutput {
+        let k = self.k;
+        let mut events = 0u8;
+        self.counters.samples = self.counters.samples.wrapping_add(1);
+        let chk = self.check(s);
+        let good = chk.ok();
+        if good {
+            let mut e = Envelopes {
+                x0: s.lockin.x0_um * self.inv_l0,
+                y0: s.lockin.y0_um * self.inv_l0,
+                ..Envelopes::default()
+            };
+            for i in 0..3 {
+                e.a[i] = s.lockin.x_um[i].scale(self.inv_l0);
+                e.b[i] = s.lockin.y_um[i].scale(self.inv_l0);
+            }
+            let acc = [
+                s.accel_mps2[0] * self.accel_nd,
+                s.accel_mps2[1] * self.accel_nd,
+            ];
+            self.last_good = Some((e, acc, s.pump_hz, s.pump_scale));
+        } else {
+            self.counters.bad_samples += 1;
+            self.counters.non_finite += chk.non_finite as u32;
+            self.counters.saturated += chk.saturated as u32;
+            self.counters.stuck += chk.stuck as u32;
+            self.bad_gate_until = k + self.gate_bad + 1;
+            events |= event::BAD_INPUT;
+        }
+        let Some((env, acc, pump_hz, pscale)) = self.last_good else {
+            // nothing valid yet: hold, keep commanding the centre
+            self.k += 1;
+            self.health = Health {
+                inputs_valid: false,
+                ..Health::default()
+            };
+            let dev = self.sched.command(self.k);
+            return StepOutput {
+                pump_hz_next: self.pump_hz_of(dev),
+                health: self.health,
+                events,
+                updated: false,
+            };
+        };
+
+        // ---- known signals through the replica of the lock-in low-pass
+        let dev = pump_hz / (2.0 * self.f0_hz) - self.om_ref;
+        let dom = T::from_f64(dev);
+        let dom2 = T::from_f64(dev * (2.0 * self.om_ref + dev));
+        let ds = pscale - T::ONE;
+        let co = self.rep_co;
+        let rep = self.rep.get_or_insert_with(|| Replicas {
+            co,
+            dom: ReplicaChannel::at_rest(&co, dom),
+            dom2: ReplicaChannel::at_rest(&co, dom2),
+            ds: ReplicaChannel::at_rest(&co, ds),
+            ax: ReplicaChannel::at_rest(&co, acc[0]),
+            ay: ReplicaChannel::at_rest(&co, acc[1]),
+        });
+        let f_dom = rep.dom.update(&rep.co, dom);
+        let known = Known {
+            om: T::from_f64(self.om_ref) + f_dom,
+            dom2: rep.dom2.update(&rep.co, dom2),
+            omd: rep.dom.derivative(&rep.co),
+            ds: rep.ds.update(&rep.co, ds),
+            ax: rep.ax.update(&rep.co, acc[0]),
+            ay: rep.ay.update(&rep.co, acc[1]),
+        };
+        let exc_rms = self.exc.push(f_dom.to_f64());
+
+        // ---- rows
+        let rows = self.rows.push(&env, &known);
+        self.last_rows = rows;
+
+        // ---- gating and RLS
+        let gated = k < self.gate_startup || k < self.jump_gate_until || k < self.bad_gate_until;
+        let mut updated = false;
+        if !gated && good {
+            updated = true;
+            self.counters.updates += 1;
+            self.rls1.begin_sample();
+            self.rls2.begin_sample();
+            let mut sum1 = 0.0;
+            let mut sum2 = 0.0;
+            for r in 0..NROWS {
+                let w = self.w1[r];
+                let mut phi = [T::ZERO; 8];
+                for j in 0..8 {
+                    phi[j] = rows.drive_phi[r][j] * self.sc1[j] * w;
+                }
+                let inn = self.rls1.update(&phi, rows.drive_y[r] * w);
+                sum1 += inn.normalized_sq().to_f64();
+                let w = self.w2[r];
+                let mut phi = [T::ZERO; 6];
+                for j in 0..6 {
+                    phi[j] = rows.sense_phi[r][j] * self.sc2[j] * w;
+                }
+                let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
+                sum2 += inn.normalized_sq().to_f64();
+            }
+            let p = T::from_f64(self.cfg.rls.p_reset);
+            if self.det1.push(k, sum1) {
+                self.rls1.reset_covariance(p);
+                self.counters.resets_drive += 1;
+                events |= event::CHANGE_DRIVE;
+            }
+            if self.det2.push(k, sum2) {
+                self.rls2.reset_covariance(p);
+                self.counters.resets_sense += 1;
+                events |= event::CHANGE_SENSE;
+            }
+            if events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
+                self.last_reset = k;
+                self.change_pending = true;
+                self.settle.clear();
+            }
+        }
+
+        // ---- settle, excitation, health
+        let wy2 = self.wy2();
+        if updated {
+            self.settle.push(k, wy2);
+        }
+        let window = (self.cfg.retune.settle_window_s * self.cfg.fs_hz) as u64;
+        let settled = !gated && self.settle.settled() && k >= self.last_reset + window;
+        if settled && !self.was_settled {
+            events |= event::SETTLED;
+            self.change_pending = false;
+            if !self.bound_learned {
+                // anti-windup bound: a factor over the converged trace (FINDINGS §4)
+                let f = self.cfg.rls.trace_bound_factor;
+                let t1 = T::from_f64(self.rls1.trace().to_f64() * f);
+                let t2 = T::from_f64(self.rls2.trace().to_f64() * f);
+                self.rls1.set_trace_max(t1);
+                self.rls2.set_trace_max(t2);
+                self.bound_learned = true;
+            }
+        }
+        self.was_settled = settled;
+        let excitation_ok = self.dither_rms > 0.0
+            && exc_rms >= self.cfg.monitor.excitation_min_fraction * self.dither_rms;
+        let (tr1, tr2) = (self.rls1.trace(), self.rls2.trace());
+        let lim1 = T::from_f64(self.cfg.rls.p0 * 8.0 * 1.0001);
+        let lim2 = T::from_f64(self.cfg.rls.p0 * 6.0 * 1.0001);
+        let covariance_bounded = tr1.is_finite()
+            && tr2.is_finite()
+            && tr1 <= lim1
+            && tr2 <= lim2
+            && self.rls1.min_d() > T::ZERO
+            && self.rls2.min_d() > T::ZERO;
+        let drive_amp = env.a[0].abs().to_f64();
+        self.last_drive_amp = drive_amp;
+        self.last_s = pscale.to_f64();
+        let mut health = Health {
+            inputs_valid: good,
+            excitation_ok,
+            covariance_bounded,
+            change_detected: self.change_pending,
+            drive_locked: self.sup.locked(),
+            settled,
+            gated,
+            retuning: self.sup.ramping(),
+        };
+
+        // ---- retune supervisor
+        let centre_om = self.om_ref + self.sched.centre();
+        let healthy = health.actionable() && k >= self.bad_gate_until;
+        let band = if healthy {
+            drive_band(&self.theta().0, self.last_s)
+        } else {
+            None
+        };
+        let act = self.sup.tick(&RetuneInputs {
+            k,
+            healthy,
+            wy2,
+            band,
+            centre_om,
+            drive_amp,
+            ramp_done: self.sched.ramp().is_none(),
+        });
+        match act {
+            RetuneAction::Start { target_om, len } => {
+                self.sched.ramp_to(target_om - self.om_ref, k + 1, len);
+                self.counters.retunes += 1;
+                events |= event::RETUNE_START;
+            }
+            RetuneAction::Abort { back_to_om, len } => {
+                self.sched.ramp_to(back_to_om - self.om_ref, k + 1, len);
+                self.counters.retune_aborts += 1;
+                events |= event::RETUNE_ABORT;
+            }
+            RetuneAction::None => {
+                if health.retuning && !self.sup.ramping() {
+                    events |= event::RETUNE_DONE;
+                }
+            }
+        }
+        health.drive_locked = self.sup.locked();
+        health.retuning = self.sup.ramping();
+        self.health = health;
+
+        // ---- next pump command
+        self.k += 1;
+        let dev = self.sched.command(self.k);
+        StepOutput {
+            pump_hz_next: self.pump_hz_of(dev),
+            health,
+            events,
+            updated,
+        }
+    }
+}

@@ -1,0 +1,489 @@
+//! Digital replica of the analog lock-in low-pass, applied to every known signal.
+//!
+//! The lock-in front end filters the demodulated displacement with an analog
+//! Butterworth low-pass (4th order, 150 Hz by default) before the 500 Hz ADC. The
+//! regression multiplies those envelopes by known signals (pump frequency ω, ω², ω′,
+//! voltage scale s, accelerations), so the known signals must see the same filter:
+//! without it the 2 ms group delay on a ±1e-3 dither makes row errors about ten times
+//! the Coriolis term (FINDINGS §3.1).
+//!
+//! The replica is the same analog filter discretised **FOH-exactly** at the sample
+//! period: between two samples the commanded signals are linear in time (the DDS sweeps
+//! linearly between updates), so the discrete filter reproduces the analog one exactly
+//! for them. The design (pole placement, matrix exponential) runs once in `f64` at
+//! build time; the per-tick update is `n²+3n` multiply-adds in `T` per channel.
+//!
+//! Realisation: a cascade of second-order sections (and one first-order section for odd
+//! orders) with states scaled to the signal (q, q′/w), which keeps every state of the
+//! order of the input, so `f32` storage loses nothing to scaling.
+
+use crate::real::Real;
+
+/// Largest supported filter order.
+pub const MAX_ORDER: usize = 8;
+const MAXAUG: usize = MAX_ORDER + 2;
+
+/// A continuous-time single-input single-output state-space model (`f64`, design time).
+#[derive(Clone, Copy, Debug)]
+pub struct Analog {
+    /// Order (number of states).
+    pub n: usize,
+    /// State matrix.
+    pub a: [[f64; MAX_ORDER]; MAX_ORDER],
+    /// Input vector.
+    pub b: [f64; MAX_ORDER],
+    /// Output vector.
+    pub c: [f64; MAX_ORDER],
+}
+
+/// Analog Butterworth low-pass of order `n` (1..=8) and cut-off `wc` (rad per time
+/// unit), unit DC gain, as a cascade of scaled sections.
+pub fn butterworth(n: usize, wc: f64) -> Analog {
+    let mut a = [[0.0; MAX_ORDER]; MAX_ORDER];
+    let mut b = [0.0; MAX_ORDER];
+    let mut c = [0.0; MAX_ORDER];
+    let n = n.clamp(1, MAX_ORDER);
+    // section inputs chain: the first section's input is u, each next section's input is
+    // the previous section's output state q.
+    let mut idx = 0usize; // next free state
+    let mut prev_out: Option<usize> = None;
+    let pairs = n / 2;
+    for k in 1..=pairs {
+        // damping of the k-th conjugate pole pair
+        let zeta = libm::sin(core::f64::consts::PI * (2 * k - 1) as f64 / (2 * n) as f64);
+        let (q, r) = (idx, idx + 1);
+        idx += 2;
+        // q' = wc r ; r' = wc (u_in - q - 2 zeta r)
+        a[q][r] = wc;
+        a[r][q] = -wc;
+        a[r][r] = -2.0 * zeta * wc;
+        match prev_out {
+            None => b[r] = wc,
+            Some(p) => a[r][p] += wc,
+        }
+        prev_out = Some(q);
+    }
+    if n % 2 == 1 {
+        let q = idx;
+        idx += 1;
+        a[q][q] = -wc;
+        match prev_out {
+            None => b[q] = wc,
+            Some(p) => a[q][p] += wc,
+        }
+        prev_out = Some(q);
+    }
+    debug_assert_eq!(idx, n);
+    if let Some(p) = prev_out {
+        c[p] = 1.0;
+    }
+    Analog { n, a, b, c }
+}
+
+/// Matrix exponential of an `m × m` block of `x` (m ≤ 10) by scaling and squaring
+/// with a 20-term Taylor series. Design-time only (`f64`).
+pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
+    let m = m.min(MAXAUG);
+    // infinity norm
+    let mut norm = 0.0f64;
+    for row in x.iter().take(m) {
+        let s: f64 = row.iter().take(m).map(|v| libm::fabs(*v)).sum();
+        norm = norm.max(s);
+    }
+    let mut squarings = 0u32;
+    let mut scale = 1.0;
+    while norm * scale > 0.25 && squarings < 60 {
+        scale *= 0.5;
+        squarings += 1;
+    }
+    let mut xs = [[0.0; MAXAUG]; MAXAUG];
+    for i in 0..m {
+        for j in 0..m {
+            xs[i][j] = x[i][j] * scale;
+        }
+    }
+    // Taylor: E = I + X + X²/2! + ...
+    let mut e = [[0.0; MAXAUG]; MAXAUG];
+    let mut term = [[0.0; MAXAUG]; MAXAUG];
+    for i in 0..m {
+        e[i][i] = 1.0;
+        term[i][i] = 1.0;
+    }
+    for k in 1..=20 {
+        term = matmul(&term, &xs, m);
+        let inv = 1.0 / k as f64;
+        for row in term.iter_mut().take(m) {
+            for v in row.iter_mut().take(m) {
+                *v *= inv;
+            }
+        }
+        for i in 0..m {
+            for j in 0..m {
+                e[i][j] += term[i][j];
+            }
+        }
+    }
+    for _ in 0..squarings {
+        e = matmul(&e, &e, m);
+    }
+    e
+}
+
+fn matmul(
+    a: &[[f64; MAXAUG]; MAXAUG],
+    b: &[[f64; MAXAUG]; MAXAUG],
+    m: usize,
+) -> [[f64; MAXAUG]; MAXAUG] {
+    let mut r = [[0.0; MAXAUG]; MAXAUG];
+    for i in 0..m {
+        for k in 0..m {
+            let aik = a[i][k];
+            if aik == 0.0 {
+                continue;
+            }
+            for j in 0..m {
+                r[i][j] += aik * b[k][j];
+            }
+        }
+    }
+    r
+}
+
+/// FOH-exact discretisation of an analog SISO model at period `ts`:
+/// `x[k+1] = Φ x[k] + Γ0 u[k] + Γ1 (u[k+1] − u[k])` (exact for piecewise-linear input).
+#[derive(Clone, Copy, Debug)]
+pub struct FohDiscrete {
+    /// Order.
+    pub n: usize,
+    /// Φ = e^{A ts}.
+    pub phi: [[f64; MAX_ORDER]; MAX_ORDER],
+    /// Γ0 = ∫ e^{A s} B ds.
+    pub g0: [f64; MAX_ORDER],
+    /// Γ1 = ∫ e^{A s} B (ts − s)/ts ds.
+    pub g1: [f64; MAX_ORDER],
+}
+
+/// Discretises `sys` with a first-order hold (augmented matrix exponential, as in
+/// `svf_discrete` of the prototype).
+pub fn foh_discretise(sys: &Analog, ts: f64) -> FohDiscrete {
+    let n = sys.n;
+    let mut m = [[0.0; MAXAUG]; MAXAUG];
+    for i in 0..n {
+        for j in 0..n {
+            m[i][j] = sys.a[i][j] * ts;
+        }
+        m[i][n] = sys.b[i] * ts;
+    }
+    m[n][n + 1] = 1.0;
+    let e = expm(&m, n + 2);
+    let mut phi = [[0.0; MAX_ORDER]; MAX_ORDER];
+    let mut g0 = [0.0; MAX_ORDER];
+    let mut g1 = [0.0; MAX_ORDER];
+    for i in 0..n {
+        phi[i][..n].copy_from_slice(&e[i][..n]);
+        g0[i] = e[i][n];
+        g1[i] = e[i][n + 1];
+    }
+    FohDiscrete { n, phi, g0, g1 }
+}
+
+/// Runtime coefficients of the replica filter in the estimator's precision.
+#[derive(Clone, Copy, Debug)]
+pub struct ReplicaCoeffs<T> {
+    n: usize,
+    phi: [[T; MAX_ORDER]; MAX_ORDER],
+    g0: [T; MAX_ORDER],
+    g1: [T; MAX_ORDER],
+    c: [T; MAX_ORDER],
+    /// C·A: the output's time derivative is C·A·x + C·B·u (C·B = 0 for order ≥ 2).
+    ca: [T; MAX_ORDER],
+    cb: T,
+}
+
+impl<T: Real> ReplicaCoeffs<T> {
+    /// Designs the replica of an order-`order` Butterworth with cut-off `wc` (rad per
+    /// time unit), sampled every `ts` time units.
+    pub fn butterworth(order: usize, wc: f64, ts: f64) -> Self {
+        let sys = butterworth(order, wc);
+        let d = foh_discretise(&sys, ts);
+        let mut r = ReplicaCoeffs {
+            n: d.n,
+            phi: [[T::ZERO; MAX_ORDER]; MAX_ORDER],
+            g0: [T::ZERO; MAX_ORDER],
+            g1: [T::ZERO; MAX_ORDER],
+            c: [T::ZERO; MAX_ORDER],
+            ca: [T::ZERO; MAX_ORDER],
+            cb: T::ZERO,
+        };
+        let mut cb = 0.0;
+        for i in 0..d.n {
+            for j in 0..d.n {
+                r.phi[i][j] = T::from_f64(d.phi[i][j]);
+            }
+            r.g0[i] = T::from_f64(d.g0[i]);
+            r.g1[i] = T::from_f64(d.g1[i]);
+            r.c[i] = T::from_f64(sys.c[i]);
+            let mut ca = 0.0;
+            for k in 0..d.n {
+                ca += sys.c[k] * sys.a[k][i];
+            }
+            r.ca[i] = T::from_f64(ca);
+            cb += sys.c[i] * sys.b[i];
+        }
+        r.cb = T::from_f64(cb);
+        r
+    }
+}
+
+/// One replica channel: filter state and the last input.
+#[derive(Clone, Copy, Debug)]
+pub struct ReplicaChannel<T> {
+    x: [T; MAX_ORDER],
+    u_prev: T,
+}
+
+impl<T: Real> ReplicaChannel<T> {
+    /// A channel at rest at input `u` (steady state: every section output equals `u`).
+    pub fn at_rest(coeffs: &ReplicaCoeffs<T>, u: T) -> Self {
+        let mut ch = ReplicaChannel {
+            x: [T::ZERO; MAX_ORDER],
+            u_prev: u,
+        };
+        ch.settle(coeffs, u);
+        ch
+    }
+
+    /// Sets the state to the steady state of a constant input `u`.
+    pub fn settle(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) {
+        // In the scaled cascade, the steady state has every section output q = u and
+        // every derivative state r = 0; the q states are the ones with a non-zero
+        // diagonal coupling to the previous output, so find them from Φ's fixed point:
+        // iterate x = Φx + Γ0u, which converges geometrically (|eig Φ| < 1). At design
+        // time a few hundred iterations are negligible.
+        let mut x = [T::ZERO; MAX_ORDER];
+        let n = coeffs.n;
+        for _ in 0..400 {
+            let mut nx = [T::ZERO; MAX_ORDER];
+            for i in 0..n {
+                let mut acc = coeffs.g0[i] * u;
+                for j in 0..n {
+                    acc += coeffs.phi[i][j] * x[j];
+                }
+                nx[i] = acc;
+            }
+            x = nx;
+        }
+        self.x = x;
+        self.u_prev = u;
+    }
+
+    /// Advances one sample with the new input `u` (FOH) and returns the filtered value.
+    #[inline]
+    pub fn update(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) -> T {
+        let n = coeffs.n;
+        let du = u - self.u_prev;
+        let mut nx = [T::ZERO; MAX_ORDER];
+        for (i, nxi) in nx.iter_mut().enumerate().take(n) {
+            let mut acc = coeffs.g0[i] * self.u_prev + coeffs.g1[i] * du;
+            for (p, xj) in coeffs.phi[i].iter().zip(self.x.iter()).take(n) {
+                acc += *p * *xj;
+            }
+            *nxi = acc;
+        }
+        self.x = nx;
+        self.u_prev = u;
+        self.output(coeffs)
+    }
+
+    /// Current filtered value C·x.
+    #[inline]
+    pub fn output(&self, coeffs: &ReplicaCoeffs<T>) -> T {
+        let mut y = T::ZERO;
+        for (c, x) in coeffs.c.iter().zip(self.x.iter()).take(coeffs.n) {
+            y += *c * *x;
+        }
+        y
+    }
+
+    /// Time derivative of the filtered value (per time unit): C·A·x + C·B·u. Exactly
+    /// the filtered derivative of the input, since the filter commutes with d/dt.
+    #[inline]
+    pub fn derivative(&self, coeffs: &ReplicaCoeffs<T>) -> T {
+        let mut y = coeffs.cb * self.u_prev;
+        for (c, x) in coeffs.ca.iter().zip(self.x.iter()).take(coeffs.n) {
+            y += *c * *x;
+        }
+        y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    /// |H(jw)| of the analog model at angular frequency w.
+    fn mag(sys: &Analog, w: f64) -> f64 {
+        // solve (jwI - A) x = B by complex Gaussian elimination
+        let n = sys.n;
+        let mut mr = [[0.0; MAX_ORDER + 1]; MAX_ORDER];
+        let mut mi = [[0.0; MAX_ORDER + 1]; MAX_ORDER];
+        for i in 0..n {
+            for j in 0..n {
+                mr[i][j] = -sys.a[i][j];
+            }
+            mi[i][i] = w;
+            mr[i][n] = sys.b[i];
+        }
+        for col in 0..n {
+            // pivot
+            let mut p = col;
+            for r in col..n {
+                if mr[r][col].hypot(mi[r][col]) > mr[p][col].hypot(mi[p][col]) {
+                    p = r;
+                }
+            }
+            mr.swap(col, p);
+            mi.swap(col, p);
+            let (pr, pi) = (mr[col][col], mi[col][col]);
+            let d = pr * pr + pi * pi;
+            for r in 0..n {
+                if r == col {
+                    continue;
+                }
+                let (ar, ai) = (mr[r][col], mi[r][col]);
+                // f = a / p
+                let fr = (ar * pr + ai * pi) / d;
+                let fi = (ai * pr - ar * pi) / d;
+                for j in col..=n {
+                    let (br, bi) = (mr[col][j], mi[col][j]);
+                    mr[r][j] -= fr * br - fi * bi;
+                    mi[r][j] -= fr * bi + fi * br;
+                }
+            }
+        }
+        let mut yr = 0.0;
+        let mut yi = 0.0;
+        for i in 0..n {
+            let (pr, pi) = (mr[i][i], mi[i][i]);
+            let d = pr * pr + pi * pi;
+            let xr = (mr[i][n] * pr + mi[i][n] * pi) / d;
+            let xi = (mi[i][n] * pr - mr[i][n] * pi) / d;
+            yr += sys.c[i] * xr;
+            yi += sys.c[i] * xi;
+        }
+        yr.hypot(yi)
+    }
+
+    #[test]
+    fn butterworth_magnitude_matches_findings() {
+        // FINDINGS §3.1: |H| = 0.98 at 100 Hz and 0.13 at 250 Hz for 4th order 150 Hz
+        let sys = butterworth(4, 2.0 * core::f64::consts::PI * 150.0);
+        let m100 = mag(&sys, 2.0 * core::f64::consts::PI * 100.0);
+        let m250 = mag(&sys, 2.0 * core::f64::consts::PI * 250.0);
+        let m0 = mag(&sys, 1e-9);
+        assert!((m0 - 1.0).abs() < 1e-9, "DC gain {m0}");
+        // exact Butterworth: 1/sqrt(1+(f/fc)^8)
+        let ex = |f: f64| 1.0 / (1.0 + (f / 150.0f64).powi(8)).sqrt();
+        assert!((m100 - ex(100.0)).abs() < 1e-12, "{m100}");
+        assert!((m250 - ex(250.0)).abs() < 1e-12, "{m250}");
+        assert!((m100 - 0.98).abs() < 0.01 && (m250 - 0.13).abs() < 0.01);
+        for n in 1..=8 {
+            let s = butterworth(n, 1.0);
+            assert!(
+                (mag(&s, 1.0) - core::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12,
+                "order {n}"
+            );
+        }
+    }
+
+    #[test]
+    fn expm_of_rotation_is_exact() {
+        let mut x = [[0.0; MAXAUG]; MAXAUG];
+        x[0][1] = 2.0;
+        x[1][0] = -2.0;
+        let e = expm(&x, 2);
+        assert!((e[0][0] - 2.0f64.cos()).abs() < 1e-14);
+        assert!((e[0][1] - 2.0f64.sin()).abs() < 1e-14);
+    }
+
+    #[test]
+    fn foh_replica_is_exact_for_ramps_and_tracks_derivative() {
+        // a ramp u = r t through a 4th-order filter: analog steady-state output is
+        // r (t - τg) with group delay τg = -d(phase)/dw at 0 = sum of 2 zeta_k / wc.
+        let wc = 2.0 * core::f64::consts::PI * 150.0;
+        let ts = 1.0 / 500.0;
+        let co = ReplicaCoeffs::<f64>::butterworth(4, wc, ts);
+        let mut ch = ReplicaChannel::at_rest(&co, 0.0);
+        let r = 3.0;
+        let mut y = 0.0;
+        let mut t = 0.0;
+        for k in 1..=200 {
+            t = k as f64 * ts;
+            y = ch.update(&co, r * t);
+        }
+        let tg: f64 = (1..=2)
+            .map(|k| 2.0 * (core::f64::consts::PI * (2 * k - 1) as f64 / 8.0).sin() / wc)
+            .sum();
+        assert!(
+            (y - r * (t - tg)).abs() < 1e-9,
+            "y {y} expected {}",
+            r * (t - tg)
+        );
+        assert!(
+            (ch.derivative(&co) - r).abs() < 1e-9,
+            "derivative {}",
+            ch.derivative(&co)
+        );
+        // at rest: output equals the input
+        let ch2 = ReplicaChannel::at_rest(&co, 0.7);
+        assert!((ch2.output(&co) - 0.7).abs() < 1e-12);
+        assert!(ch2.derivative(&co).abs() < 1e-9);
+    }
+
+    #[test]
+    fn foh_matches_fine_integration_for_a_sine() {
+        // compare against a fine RK4 integration of the analog model with a sinusoidal
+        // input linearly interpolated between the samples (the FOH assumption).
+        let wc = 1.3;
+        let ts = 0.7;
+        let sys = butterworth(3, wc);
+        let co = ReplicaCoeffs::<f64>::butterworth(3, wc, ts);
+        let mut ch = ReplicaChannel::at_rest(&co, 0.0);
+        let mut x = [0.0f64; MAX_ORDER];
+        let u = |k: usize| (0.4 * k as f64).sin();
+        let f = |x: &[f64; MAX_ORDER], uu: f64| {
+            let mut d = [0.0; MAX_ORDER];
+            for i in 0..3 {
+                d[i] = sys.b[i] * uu;
+                for j in 0..3 {
+                    d[i] += sys.a[i][j] * x[j];
+                }
+            }
+            d
+        };
+        let m = 400;
+        for k in 0..40 {
+            let (u0, u1) = (u(k), u(k + 1));
+            let h = ts / m as f64;
+            for i in 0..m {
+                let ui = |s: f64| u0 + (u1 - u0) * s;
+                let a0 = i as f64 / m as f64;
+                let ah = (i as f64 + 0.5) / m as f64;
+                let a1 = (i as f64 + 1.0) / m as f64;
+                let k1 = f(&x, ui(a0));
+                let mut xt = x;
+                (0..3).for_each(|q| xt[q] = x[q] + 0.5 * h * k1[q]);
+                let k2 = f(&xt, ui(ah));
+                (0..3).for_each(|q| xt[q] = x[q] + 0.5 * h * k2[q]);
+                let k3 = f(&xt, ui(ah));
+                (0..3).for_each(|q| xt[q] = x[q] + h * k3[q]);
+                let k4 = f(&xt, ui(a1));
+                (0..3).for_each(|q| x[q] += h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q]));
+            }
+            let y = ch.update(&co, u1);
+            let yref: f64 = (0..3).map(|i| sys.c[i] * x[i]).sum();
+            assert!((y - yref).abs() < 1e-11, "k {k}: {y} vs {yref}");
+        }
+    }
+}

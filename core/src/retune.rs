@@ -1,0 +1,314 @@
+//! The retune supervisor: moves the pump centre so that 2Ω = 2·ω_y (the paper's rule,
+//! ω = √ω̂y²) once the estimate is healthy and settled.
+//!
+//! * The move is a raised-cosine ramp of the centre (phase-continuous at the DDS),
+//!   at least `ramp_s` long and slow enough for `max_rate_hz_per_s`.
+//! * The target is clamped inside the drive's principal parametric band computed from
+//!   the *estimated* θ (DERIVATION §6): ω² ∈ K ± √((sβ)² − μ²K), K = −(θ12 + (s−1)θ16),
+//!   β = |θ16|/2, μ = −θ11, with a margin of `band_margin` of the band's width on each
+//!   side. Outside that band the trivial state is stable and the drive dies
+//!   (FINDINGS §3.5).
+//! * "Drive lock lost": |A1| below `lock_min_um` for `lock_lost_s`. A ramp in progress
+//!   is then reversed to where it came from, and no new retune starts until the lock is
+//!   back.
+
+/// The drive's principal parametric band in ω (pump half-frequency), from θ1.
+/// Returns `None` when the pump is too weak for any band (β < μ√K) or θ is invalid.
+pub fn drive_band(th1: &[f64; 8], s: f64) -> Option<(f64, f64)> {
+    let k = -(th1[1] + (s - 1.0) * th1[5]);
+    let b = libm::fabs(s * th1[5]) / 2.0;
+    let mu = -th1[0];
+    if !(k.is_finite() && b.is_finite() && mu.is_finite()) || k <= 0.0 {
+        return None;
+    }
+    let disc = b * b - mu * mu * k;
+    if disc <= 0.0 {
+        return None;
+    }
+    let r = libm::sqrt(disc);
+    if k - r <= 0.0 {
+        return None;
+    }
+    Some((libm::sqrt(k - r), libm::sqrt(k + r)))
+}
+
+/// What the supervisor decided this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RetuneAction {
+    /// Nothing to do.
+    None,
+    /// Start a ramp of the centre to this ω (absolute, non-dimensional) over `len` samples.
+    Start {
+        /// Target ω.
+        target_om: f64,
+        /// Ramp length in samples.
+        len: u64,
+    },
+    /// Drive lock lost during a ramp: ramp back to this ω over `len` samples.
+    Abort {
+        /// ω to return to.
+        back_to_om: f64,
+        /// Ramp length in samples.
+        len: u64,
+    },
+}
+
+/// Supervisor state.
+#[derive(Clone, Copy, Debug)]
+pub struct Supervisor {
+    /// Retune allowed.
+    pub enabled: bool,
+    ramp_min: u64,
+    max_rate: f64,
+    deadband: f64,
+    margin: f64,
+    min_interval: u64,
+    lock_min: f64,
+    lock_lost_after: u64,
+    below_since: Option<u64>,
+    locked: bool,
+    ramping: Option<(u64, u64, f64)>, // (start k, len, from ω)
+    last_end: Option<u64>,
+    retunes: u32,
+    last_target: f64,
+}
+
+/// Settings of the supervisor in samples and ω units (from `RetuneConfig`).
+#[derive(Clone, Copy, Debug)]
+pub struct SupervisorSettings {
+    /// Allowed at start-up.
+    pub enabled: bool,
+    /// Minimum ramp length, samples.
+    pub ramp_min: u64,
+    /// Largest ramp rate, ω per sample.
+    pub max_rate: f64,
+    /// Dead band, ω.
+    pub deadband: f64,
+    /// Band margin, fraction of the band width.
+    pub margin: f64,
+    /// Minimum interval between retunes, samples.
+    pub min_interval: u64,
+    /// Lock threshold on |A1|, L0.
+    pub lock_min: f64,
+    /// Samples below the threshold before the lock counts as lost.
+    pub lock_lost_after: u64,
+}
+
+/// Health inputs of one decision.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RetuneInputs {
+    /// Sample index.
+    pub k: u64,
+    /// Everything healthy and settled (inputs, excitation, covariance, no change).
+    pub healthy: bool,
+    /// Estimated ω_y² (f64).
+    pub wy2: f64,
+    /// Estimated drive band (ω), if any.
+    pub band: Option<(f64, f64)>,
+    /// Current centre ω.
+    pub centre_om: f64,
+    /// Drive amplitude |A1| (L0).
+    pub drive_amp: f64,
+    /// The scheduler's ramp has finished.
+    pub ramp_done: bool,
+}
+
+impl Supervisor {
+    /// A supervisor with these settings.
+    pub fn new(s: SupervisorSettings) -> Self {
+        Supervisor {
+            enabled: s.enabled,
+            ramp_min: s.ramp_min.max(1),
+            max_rate: s.max_rate,
+            deadband: s.deadband,
+            margin: s.margin,
+            min_interval: s.min_interval,
+            lock_min: s.lock_min,
+            lock_lost_after: s.lock_lost_after,
+            below_since: None,
+            locked: false,
+            ramping: None,
+            last_end: None,
+            retunes: 0,
+            last_target: f64::NAN,
+        }
+    }
+
+    /// Drive locked (|A1| above threshold, not lost).
+    pub fn locked(&self) -> bool {
+        self.locked
+    }
+    /// A retune ramp is in progress.
+    pub fn ramping(&self) -> bool {
+        self.ramping.is_some()
+    }
+    /// Completed or started retunes.
+    pub fn retunes(&self) -> u32 {
+        self.retunes
+    }
+    /// Last target ω (NaN before the first retune).
+    pub fn last_target(&self) -> f64 {
+        self.last_target
+    }
+
+    /// Target ω for an estimated ω_y² and band.
+    pub fn target(&self, wy2: f64, band: Option<(f64, f64)>) -> Option<f64> {
+        if !(wy2.is_finite() && wy2 > 0.0) {
+            return None;
+        }
+        let (lo, hi) = band?;
+        let w = hi - lo;
+        let (lo, hi) = (lo + self.margin * w, hi - self.margin * w);
+        Some(libm::sqrt(wy2).clamp(lo, hi))
+    }
+
+    /// One tick of the supervisor.
+    pub fn tick(&mut self, i: &RetuneInputs) -> RetuneAction {
+        // drive lock
+        if i.drive_amp.is_finite() && i.drive_amp >= self.lock_min {
+            self.below_since = None;
+            self.locked = true;
+        } else {
+            let since = *self.below_since.get_or_insert(i.k);
+            if i.k >= since + self.lock_lost_after {
+                self.locked = false;
+            }
+        }
+        if let Some((k0, len, from)) = self.ramping {
+            if !self.locked {
+                self.ramping = None;
+                self.last_end = Some(i.k);
+                let done = (i.k - k0).min(len);
+                return RetuneAction::Abort {
+                    back_to_om: from,
+                    len: done.max(self.ramp_min / 2).max(1),
+                };
+            }
+            if i.ramp_done || i.k >= k0 + len {
+                self.ramping = None;
+                self.last_end = Some(i.k);
+            }
+            return RetuneAction::None;
+        }
+        if !self.enabled || !self.locked || !i.healthy {
+            return RetuneAction::None;
+        }
+        if let Some(e) = self.last_end
+            && i.k < e + self.min_interval
+        {
+            return RetuneAction::None;
+        }
+        let Some(target) = self.target(i.wy2, i.band) else {
+            return RetuneAction::None;
+        };
+        let delta = target - i.centre_om;
+        if libm::fabs(delta) <= self.deadband {
+            return RetuneAction::None;
+        }
+        // raised cosine peak slope = π/2 · Δ / len  ≤ max_rate
+        let by_rate = (core::f64::consts::FRAC_PI_2 * libm::fabs(delta) / self.max_rate.max(1e-30))
+            as u64
+            + 1;
+        let len = self.ramp_min.max(by_rate);
+        self.ramping = Some((i.k, len, i.centre_om));
+        self.retunes += 1;
+        self.last_target = target;
+        RetuneAction::Start {
+            target_om: target,
+            len,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    fn th1_table2() -> [f64; 8] {
+        let g: f64 = 3.8581e-5;
+        [
+            -1e-3,
+            -(1.0 - g * g + 0.0452),
+            -0.002,
+            -(1e-4 - 2.0 * g),
+            -(2.0 * 6.33e-5 + 0.002303),
+            -0.0452,
+            -1.266e-4,
+            1.0,
+        ]
+    }
+
+    #[test]
+    fn band_matches_derivation() {
+        // DERIVATION §6: (1.01125, 1.03333) for Table 2
+        let (lo, hi) = drive_band(&th1_table2(), 1.0).unwrap();
+        assert!(
+            (lo - 1.01125).abs() < 5e-5 && (hi - 1.03333).abs() < 5e-5,
+            "{lo} {hi}"
+        );
+        // a weak pump has no band
+        assert!(drive_band(&th1_table2(), 0.02).is_none());
+    }
+
+    fn settings() -> SupervisorSettings {
+        SupervisorSettings {
+            enabled: true,
+            ramp_min: 250,
+            max_rate: 1e-5,
+            deadband: 1e-4,
+            margin: 0.1,
+            min_interval: 500,
+            lock_min: 0.2,
+            lock_lost_after: 25,
+        }
+    }
+
+    #[test]
+    fn retunes_to_sqrt_wy2_once_healthy() {
+        let mut s = Supervisor::new(settings());
+        let band = drive_band(&th1_table2(), 1.0);
+        let mut inp = RetuneInputs {
+            k: 0,
+            healthy: false,
+            wy2: 1.03,
+            band,
+            centre_om: 1.0265f64.sqrt(),
+            drive_amp: 1.7,
+            ramp_done: true,
+        };
+        assert_eq!(s.tick(&inp), RetuneAction::None, "not healthy yet");
+        inp.k = 1;
+        inp.healthy = true;
+        match s.tick(&inp) {
+            RetuneAction::Start { target_om, len } => {
+                assert!((target_om - 1.03f64.sqrt()).abs() < 1e-12);
+                assert!(len >= 250);
+            }
+            a => panic!("expected a retune, got {a:?}"),
+        }
+        assert!(s.ramping());
+        // lock lost mid-ramp → abort back
+        inp.drive_amp = 0.0;
+        inp.ramp_done = false;
+        let mut aborted = false;
+        for k in 2..100 {
+            inp.k = k;
+            if let RetuneAction::Abort { back_to_om, .. } = s.tick(&inp) {
+                assert!((back_to_om - 1.0265f64.sqrt()).abs() < 1e-12);
+                aborted = true;
+                break;
+            }
+        }
+        assert!(aborted && !s.locked());
+    }
+
+    #[test]
+    fn target_is_clamped_into_the_band() {
+        let s = Supervisor::new(settings());
+        let band = drive_band(&th1_table2(), 1.0).unwrap();
+        let t = s.target(1.2, Some(band)).unwrap();
+        assert!(t < band.1 && t > band.0);
+        assert!(s.target(1.03, None).is_none());
+    }
+}
