@@ -40,6 +40,10 @@ pub struct RlsConfig {
     /// Anti-windup: forgetting stops while trace(P) exceeds this factor times the trace
     /// at the moment the estimate first settled (FINDINGS §4: 10×).
     pub trace_bound_factor: f64,
+    /// Re-linearise about the settled estimate when it settles and then every this many
+    /// seconds while it stays settled (0 disables): keeps the `f32` innovation small
+    /// when the design values are far from the device.
+    pub relinearize_s: f64,
 }
 
 /// Input validation, gating and the change detector.
@@ -170,6 +174,7 @@ impl Config {
                 p0: 1e4,
                 p_reset: 1.0,
                 trace_bound_factor: 10.0,
+                relinearize_s: 2.0,
             },
             monitor: MonitorConfig {
                 gate_startup_s: 0.5,
@@ -188,7 +193,7 @@ impl Config {
                 ramp_s: 0.5,
                 max_rate_hz_per_s: 200.0,
                 deadband_hz: 2.0,
-                band_margin: 0.1,
+                band_margin: 0.05,
                 settle_window_s: 0.5,
                 settle_tol: 2e-5,
                 lock_min_um: 0.2,
@@ -324,6 +329,7 @@ impl Config {
         if !(r.trace_bound_factor.is_finite() && r.trace_bound_factor >= 1.0) {
             return Err(E::new("rls.trace_bound_factor", "must be finite and >= 1"));
         }
+        nonneg(r.relinearize_s, "rls.relinearize_s")?;
         let m = &self.monitor;
         nonneg(m.gate_startup_s, "monitor.gate_startup_s")?;
         nonneg(m.gate_jump_s, "monitor.gate_jump_s")?;

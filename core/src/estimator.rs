@@ -273,6 +273,8 @@ pub struct Estimator<T: Real> {
     counters: Counters,
     last_drive_amp: f64,
     last_s: f64,
+    last_relin: u64,
+    relins: u32,
 }
 
 impl<T: Real> Estimator<T> {
@@ -377,6 +379,8 @@ impl<T: Real> Estimator<T> {
             counters: Counters::default(),
             last_drive_amp: 0.0,
             last_s: 1.0,
+            last_relin: 0,
+            relins: 0,
         }
     }
 
@@ -418,6 +422,7 @@ impl<T: Real> Estimator<T> {
             self.last_reset = self.k;
             self.change_pending = true;
             self.settle.clear();
+            self.lift_trace_bound();
             self.counters.jumps += 1;
         } else {
             let len = libm::round(self.cfg.retune.ramp_s * self.cfg.fs_hz).max(1.0) as u64;
@@ -433,6 +438,35 @@ impl<T: Real> Estimator<T> {
     /// Allows or forbids the retune supervisor.
     pub fn set_retune(&mut self, on: bool) {
         self.sup.enabled = on;
+    }
+
+    /// After a covariance reset the converged trace of the old regime means nothing:
+    /// the bound is lifted to its start-up value and learned again at the next settle.
+    fn lift_trace_bound(&mut self) {
+        let p0 = self.cfg.rls.p0;
+        self.rls1.set_trace_max(T::from_f64(p0 * 8.0 * 10.0));
+        self.rls2.set_trace_max(T::from_f64(p0 * 6.0 * 10.0));
+        self.bound_learned = false;
+    }
+
+    /// Moves the linearisation point θ_nom to the current estimate (δθ → 0). The
+    /// column scales stay those of the configured design, so P keeps its meaning.
+    fn relinearize(&mut self) {
+        let (t1, t2) = self.theta();
+        if t1.iter().chain(t2.iter()).any(|v| !v.is_finite()) {
+            return;
+        }
+        self.rows.relinearize(&t1, &t2, self.om_ref);
+        self.th1n = t1;
+        self.th2n = t2;
+        self.rls1.set_estimate([T::ZERO; 8]);
+        self.rls2.set_estimate([T::ZERO; 6]);
+        self.relins += 1;
+    }
+
+    /// Times the linearisation point moved to the settled estimate.
+    pub fn relinearizations(&self) -> u32 {
+        self.relins
     }
 
     /// Health after the last step.
@@ -657,6 +691,7 @@ impl<T: Real> Estimator<T> {
                 self.last_reset = k;
                 self.change_pending = true;
                 self.settle.clear();
+                self.lift_trace_bound();
             }
         }
 
@@ -671,7 +706,8 @@ impl<T: Real> Estimator<T> {
             events |= event::SETTLED;
             self.change_pending = false;
             if !self.bound_learned {
-                // anti-windup bound: a factor over the converged trace (FINDINGS §4)
+                // anti-windup bound: a factor over the converged trace (FINDINGS §4),
+                // learned anew after every reset (a new regime has another trace)
                 let f = self.cfg.rls.trace_bound_factor;
                 let t1 = T::from_f64(self.rls1.trace().to_f64() * f);
                 let t2 = T::from_f64(self.rls2.trace().to_f64() * f);
@@ -681,6 +717,14 @@ impl<T: Real> Estimator<T> {
             }
         }
         self.was_settled = settled;
+        let relin_every = (self.cfg.rls.relinearize_s * self.cfg.fs_hz) as u64;
+        if relin_every > 0
+            && settled
+            && (events & event::SETTLED != 0 || k >= self.last_relin + relin_every)
+        {
+            self.relinearize();
+            self.last_relin = k;
+        }
         let excitation_ok = self.dither_rms > 0.0
             && exc_rms >= self.cfg.monitor.excitation_min_fraction * self.dither_rms;
         let (tr1, tr2) = (self.rls1.trace(), self.rls2.trace());

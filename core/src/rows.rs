@@ -195,6 +195,65 @@ impl<T: Real> RowBuilder<T> {
         }
     }
 
+    /// Moves the linearisation point to a new nominal θ (e.g. the settled estimate), so
+    /// that the combined signals stay small and the `f32` innovation keeps its precision.
+    ///
+    /// The combination filters hold the state of `v0 = … − Σ θn_j g_j` where `g_j` are
+    /// the unfiltered column signals; the filters are linear and share their
+    /// coefficients, so the new state is the old one minus `Σ Δθ_j · state(g_j)`, exactly
+    /// in exact arithmetic. The regressor columns are unchanged.
+    pub fn relinearize(&mut self, th1: &[f64; 8], th2: &[f64; 6], om_ref: f64) {
+        let new = NominalConsts::<T>::new(th1, th2, om_ref);
+        let mut d1 = [T::ZERO; 8];
+        let mut d2 = [T::ZERO; 6];
+        for j in 0..8 {
+            d1[j] = new.th1[j] - self.nom.th1[j];
+        }
+        for j in 0..6 {
+            d2[j] = new.th2[j] - self.nom.th2[j];
+        }
+        if self.started {
+            for (hi, f) in self.h.iter_mut().enumerate() {
+                let k = if hi == 0 { T::ONE } else { T::from_f64(3.0) };
+                // the coefficient of A in v0 is −(k²ω_ref² + θ12n + k²δω²): use the
+                // difference of the precomputed small constants, not of the rounded θ12n
+                let dc12 = new.c12[hi + 1] - self.nom.c12[hi + 1];
+                let dc22 = new.c22[hi + 1] - self.nom.c22[hi + 1];
+                // ∂v0x/∂θ: θ11 → −ik ωA, θ12 → −A, θ13 → −B, θ14 → −ik ωB, θ15..17 → −P
+                let neg = |v: T| Cplx::new(-v, T::ZERO);
+                let negik = |v: T| Cplx::new(T::ZERO, -k * v);
+                let (oma, omb, a, b, p15, p16, p17, p25) =
+                    (f.oma, f.omb, f.a, f.b, f.p15, f.p16, f.p17, f.p25);
+                f.vx.caxpy(negik(d1[0]), &oma);
+                f.vx.caxpy(neg(dc12), &a);
+                f.vx.caxpy(neg(d1[2]), &b);
+                f.vx.caxpy(negik(d1[3]), &omb);
+                f.vx.caxpy(neg(d1[4]), &p15);
+                f.vx.caxpy(neg(d1[5]), &p16);
+                f.vx.caxpy(neg(d1[6]), &p17);
+                f.vy.caxpy(negik(d2[0]), &omb);
+                f.vy.caxpy(neg(dc22), &b);
+                f.vy.caxpy(neg(d2[2]), &a);
+                f.vy.caxpy(negik(d2[3]), &oma);
+                f.vy.caxpy(neg(d2[4]), &p25);
+            }
+            let d = &mut self.dc;
+            let (x0, y0, p15, p16, p17, p25, ax, ay) =
+                (d.x0, d.y0, d.p15, d.p16, d.p17, d.p25, d.ax, d.ay);
+            d.vx.axpy(-d1[1], &x0);
+            d.vx.axpy(-d1[2], &y0);
+            d.vx.axpy(-d1[4], &p15);
+            d.vx.axpy(-d1[5], &p16);
+            d.vx.axpy(-d1[6], &p17);
+            d.vx.axpy(-d1[7], &ax);
+            d.vy.axpy(-d2[1], &y0);
+            d.vy.axpy(-d2[2], &x0);
+            d.vy.axpy(-d2[4], &p25);
+            d.vy.axpy(-d2[5], &ay);
+        }
+        self.nom = new;
+    }
+
     /// Restarts the filters at the next sample (they start at rest at its values).
     pub fn restart(&mut self) {
         self.started = false;

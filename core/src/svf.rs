@@ -104,6 +104,14 @@ impl<T: Real> SvfState<T> {
         self.outputs(c)
     }
 
+    /// `self += alpha · other`: the filter is linear, so this is the state of the
+    /// filtered combination of the two inputs (used to re-linearise the rows).
+    pub fn axpy(&mut self, alpha: T, other: &SvfState<T>) {
+        self.p1 += alpha * other.p1;
+        self.p2 += alpha * other.p2;
+        self.u += alpha * other.u;
+    }
+
     /// Outputs at the current time.
     #[inline]
     pub fn outputs(&self, c: &SvfCoeffs<T>) -> Svf3<T> {
@@ -141,6 +149,15 @@ impl<T: Real> CSvfState<T> {
             im: SvfState::at_rest(u.im),
         }
     }
+    /// `self += alpha · other` for a complex `alpha` (linearity of the filter).
+    pub fn caxpy(&mut self, alpha: Cplx<T>, other: &CSvfState<T>) {
+        // (ar + i ai)(or + i oi) = (ar or − ai oi) + i (ar oi + ai or)
+        self.re.axpy(alpha.re, &other.re);
+        self.re.axpy(-alpha.im, &other.im);
+        self.im.axpy(alpha.re, &other.im);
+        self.im.axpy(alpha.im, &other.re);
+    }
+
     /// Advances one sample.
     #[inline]
     pub fn update(&mut self, c: &SvfCoeffs<T>, u: Cplx<T>) -> CSvf3<T> {

@@ -1,7 +1,21 @@
-//! Drives the core with the simulated gyro, scenario by scenario. (Being written.)
+//! Drives the core with the simulated gyro, scenario by scenario.
+//!
+//! Closed loop at 500 Hz: at sample k the lock-in outputs of the simulated plant, the
+//! accelerations and the pump in effect go into `Estimator::step`, which returns the
+//! pump command for sample k+1; the plant is then integrated over [t_k, t_{k+1}] with
+//! the pump frequency sweeping linearly to that command (the DDS is phase-continuous).
+//! The same loop runs the core in `f32` (what the chip runs) or `f64`.
 
-use crate::scenario::Scenario;
-use crate::trace::RunResult;
+use std::time::Instant;
+
+use anyhow::Context;
+use paragyro_core::physics::{Physical, physical_from_theta};
+use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample};
+use serde_json::{Map, Value, json};
+
+use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
+use crate::scenario::{EventKind, Scenario};
+use crate::trace::{Event, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow};
 
 /// Precision of the core instantiation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -10,6 +24,16 @@ pub enum Precision {
     F32,
     /// `Estimator<f64>`: host reference.
     F64,
+}
+
+impl Precision {
+    /// "f32" / "f64".
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
 }
 
 /// Options of one run.
@@ -21,11 +45,360 @@ pub struct RunOptions {
     pub seed: Option<u64>,
 }
 
-/// Runs a scenario; `progress` is called with the fraction done (0..=1) now and then.
-pub fn run(
-    _scenario: &Scenario,
-    _opts: &RunOptions,
-    _progress: &mut dyn FnMut(f64),
-) -> anyhow::Result<RunResult> {
-    anyhow::bail!("runner not implemented yet")
+/// L0 in metres (1 µm).
+const L0_M: f64 = 1e-6;
+
+/// The core's configuration for a scenario: Table 2 defaults, the scenario's
+/// front end, nominal design (with zero rate: the design knows no rotation) and
+/// excitation.
+pub fn core_config(sc: &Scenario) -> Config {
+    let mut c = Config::table2();
+    c.f0_hz = sc.sim.f0_hz;
+    c.lockin_lpf_order = sc.sim.lockin_lpf_order;
+    c.lockin_lpf_hz = sc.sim.lockin_lpf_hz;
+    // rows are weighted to unit noise; a noise-free run keeps the 1 pm/√Hz weighting
+    c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 { sc.sim.noise_pm_rthz } else { 1.0 };
+    if sc.sim.noise_pm_rthz <= 0.0 {
+        // noise-free data can legitimately repeat values
+        c.monitor.stuck_samples = 0;
+    }
+    let n = &sc.estimator.nominal;
+    c.nominal = Physical {
+        mu_x: n.mu_x,
+        mu_y: n.mu_y,
+        mu_xy: n.mu_xy,
+        wx2: n.wx2,
+        wy2: n.wy2,
+        wxy2: n.wxy2,
+        alpha_x: n.alpha_x,
+        alpha_y: n.alpha_y,
+        beta1: n.beta1,
+        beta3: n.beta3,
+        gamma: 0.0,
+        gamma_p: 0.0,
+        c_ax: 1.0,
+        c_ay: 1.0,
+    };
+    c.pump_centre_hz = sc.pump_centre_hz();
+    c.dither.pump_hz = sc.estimator.dither_pump_hz;
+    c.dither.freq_hz = sc.estimator.dither_freq_hz;
+    c.dither.start_s = sc.estimator.dither_start_s;
+    c.dither.enabled = sc.estimator.dither_pump_hz > 0.0;
+    c.rls.forgetting = sc.estimator.forgetting;
+    c.monitor.gate_startup_s = sc.estimator.gate_startup_s;
+    c.retune.enabled = sc.estimator.retune;
+    c.retune.ramp_s = sc.estimator.retune_ramp_s;
+    c
+}
+
+/// Largest ω (pump half-frequency, non-dimensional) the run may reach, for the
+/// integrator's step count.
+fn omega_max(sc: &Scenario, cfg: &Config) -> f64 {
+    let f0 = sc.sim.f0_hz;
+    let mut pump = sc.pump_centre_hz();
+    for e in sc.control_events() {
+        if let Some(c) = sc.pump_jump_centre_hz(&e) {
+            pump = pump.max(c);
+        }
+    }
+    // retune may move the centre up to the drive band's top: allow 3 % margin
+    (pump + cfg.dither.pump_hz) / (2.0 * f0) * 1.03
+}
+
+/// Runs a scenario (and its twin, if it has one); `progress` gets the fraction done.
+pub fn run(scenario: &Scenario, opts: &RunOptions, progress: &mut dyn FnMut(f64)) -> anyhow::Result<RunResult> {
+    let wall = Instant::now();
+    let twin_sc = scenario.twin_scenario();
+    let share = if twin_sc.is_some() { 0.5 } else { 1.0 };
+    let main = {
+        let mut p = |f: f64| progress(f * share);
+        match opts.precision {
+            Precision::F32 => simulate::<f32>(scenario, opts, &mut p),
+            Precision::F64 => simulate::<f64>(scenario, opts, &mut p),
+        }
+        .with_context(|| format!("scenario '{}'", scenario.name))?
+    };
+    let twin = match &twin_sc {
+        Some(t) => {
+            let mut p = |f: f64| progress(0.5 + 0.5 * f);
+            let r = match opts.precision {
+                Precision::F32 => simulate::<f32>(t, opts, &mut p),
+                Precision::F64 => simulate::<f64>(t, opts, &mut p),
+            }
+            .with_context(|| format!("twin of scenario '{}'", scenario.name))?;
+            Some(r)
+        }
+        None => None,
+    };
+    progress(1.0);
+    let mut summary = summarize(scenario, opts, &main, twin.as_ref());
+    if let Value::Object(m) = &mut summary {
+        m.insert("wall_seconds".into(), json!(wall.elapsed().as_secs_f64()));
+    }
+    Ok(RunResult {
+        scenario: scenario.name.clone(),
+        precision: opts.precision.name().into(),
+        trace: main.trace,
+        events: main.events,
+        summary,
+        twin: twin.map(|t| t.trace),
+    })
+}
+
+/// One simulated run's raw outcome.
+pub struct SimRun {
+    /// Per-sample trace.
+    pub trace: Vec<TraceRow>,
+    /// Events.
+    pub events: Vec<Event>,
+    /// Counters of the core at the end.
+    pub counters: paragyro_core::Counters,
+    /// Dither start, s.
+    pub dither_start_s: f64,
+    /// Final pump centre, Hz.
+    pub pump_centre_final_hz: f64,
+}
+
+/// Runs one scenario (no twin) with the core in precision `T`.
+pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn FnMut(f64)) -> anyhow::Result<SimRun> {
+    let cfg = core_config(sc);
+    let mut est: Estimator<T> = cfg.build().map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let f0 = sc.sim.f0_hz;
+    let w0 = sc.omega0_rad_s();
+    let fs = cfg.fs_hz;
+    let simcfg = SimConfig {
+        omega0_rad_s: w0,
+        fs_hz: fs,
+        steps_per_period: sc.sim.steps_per_period,
+        omega_max: omega_max(sc, &cfg),
+        lpf_order: sc.sim.lockin_lpf_order,
+        lpf_hz: sc.sim.lockin_lpf_hz,
+        noise_density: sc.sim.noise_pm_rthz * 1e-6,
+        seed: opts.seed.unwrap_or(sc.seed),
+    };
+    let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
+    let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let n = (sc.duration_s * fs).round() as u64;
+    let accel_si = L0_M * w0 * w0;
+    let controls = sc.control_events();
+    let mut next_ctrl = 0usize;
+    let mut events: Vec<Event> = sc
+        .events
+        .iter()
+        .filter(|e| !e.kind.is_control())
+        .map(|e| Event { t_s: e.t_s, what: describe(&e.kind) })
+        .collect();
+    let mut trace = Vec::with_capacity(n as usize + 1);
+    let mut pump_hz = est.initial_pump_hz();
+    let mut last_progress = Instant::now();
+    for k in 0..=n {
+        let t = k as f64 / fs;
+        let t_next = (k + 1) as f64 / fs;
+        // control events that take effect by the next sample instant
+        while next_ctrl < controls.len() && controls[next_ctrl].t_s <= t_next + 1e-12 {
+            let e = controls[next_ctrl];
+            match e.kind {
+                EventKind::PumpJump { .. } => {
+                    if let Some(c) = sc.pump_jump_centre_hz(&e) {
+                        est.command_pump_centre(c, true);
+                    }
+                }
+                EventKind::Dither { enabled } => est.set_dither(enabled),
+                EventKind::Retune { enabled } => est.set_retune(enabled),
+                _ => {}
+            }
+            events.push(Event { t_s: e.t_s, what: describe(&e.kind) });
+            next_ctrl += 1;
+        }
+        let pa = sc.plant_at(t);
+        let s_k = sc.pump_scale_at(t);
+        let li = sim.lockin();
+        let c = |p: (f64, f64)| Cplx::new(T::from_f64(p.0), T::from_f64(p.1));
+        let sample = Sample {
+            lockin: Lockin {
+                x0_um: T::from_f64(li.x0),
+                x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])],
+                y0_um: T::from_f64(li.y0),
+                y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
+            },
+            accel_mps2: [T::from_f64(pa.accel_x * accel_si), T::from_f64(pa.accel_y * accel_si)],
+            pump_hz,
+            pump_scale: T::from_f64(s_k),
+        };
+        let out = est.step(&sample);
+        let (th1, th2) = est.theta();
+        let phys = physical_from_theta(&th1, &th2).as_array();
+        trace.push(TraceRow {
+            t_s: t,
+            pump_hz,
+            pump_centre_hz: est.pump_centre_hz(),
+            pump_scale: s_k,
+            theta_drive_true: pa.theta_drive,
+            theta_sense_true: pa.theta_sense,
+            theta_drive_est: th1,
+            theta_sense_est: th2,
+            phys_true: pa.phys,
+            phys_est: phys,
+            rate_dps_true: pa.rate_dps,
+            rate_dps_est: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
+            drive_amp_um: li.x_abs(1),
+            sense_amp_um: li.y_abs(1),
+            health: out.health.bits(),
+            resets: est.counters().resets_drive + est.counters().resets_sense,
+            bad_samples: est.counters().bad_samples,
+        });
+        for (bit, what) in EVENT_NAMES {
+            if out.events & bit != 0 {
+                events.push(Event { t_s: t, what: what.to_string() });
+            }
+        }
+        if k == n {
+            break;
+        }
+        // integrate the plant over [t_k, t_{k+1}]
+        let pa1 = sc.plant_at(t_next);
+        let theta = Theta { drive: pa.theta_drive, sense: pa.theta_sense };
+        let u0 = PlantInputs { omega: pump_hz / (2.0 * f0), s: s_k, ax: pa.accel_x, ay: pa.accel_y };
+        let u1 = PlantInputs {
+            omega: out.pump_hz_next / (2.0 * f0),
+            s: sc.pump_scale_at(t_next),
+            ax: pa1.accel_x,
+            ay: pa1.accel_y,
+        };
+        sim.advance(&theta, &u0, &u1);
+        pump_hz = out.pump_hz_next;
+        if k % 50 == 0 && last_progress.elapsed().as_millis() >= 100 {
+            progress(k as f64 / n as f64);
+            last_progress = Instant::now();
+        }
+    }
+    events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    Ok(SimRun {
+        trace,
+        events,
+        counters: est.counters(),
+        dither_start_s: cfg.dither.start_s,
+        pump_centre_final_hz: est.pump_centre_hz(),
+    })
+}
+
+const EVENT_NAMES: [(u8, &str); 7] = [
+    (paragyro_core::estimator::event::CHANGE_DRIVE, "change detected (drive): covariance reset"),
+    (paragyro_core::estimator::event::CHANGE_SENSE, "change detected (sense): covariance reset"),
+    (paragyro_core::estimator::event::RETUNE_START, "retune started"),
+    (paragyro_core::estimator::event::RETUNE_DONE, "retune done"),
+    (paragyro_core::estimator::event::RETUNE_ABORT, "retune aborted: drive lock lost"),
+    (paragyro_core::estimator::event::BAD_INPUT, "bad input sample skipped"),
+    (paragyro_core::estimator::event::SETTLED, "estimate settled"),
+];
+
+fn describe(k: &EventKind) -> String {
+    match k {
+        EventKind::Ramp { param, to, duration_s } => format!("ramp {} → {to} over {duration_s} s", param.name()),
+        EventKind::ScaleTheta { factor } => format!("θ scaled ×{factor}"),
+        EventKind::PumpJump { centre_hz, to_sense_resonance } => match centre_hz {
+            Some(c) => format!("pump jump to {c:.1} Hz"),
+            None if *to_sense_resonance => "pump jump to the sense resonance".into(),
+            None => "pump jump".into(),
+        },
+        EventKind::Dither { enabled } => format!("dither {}", if *enabled { "on" } else { "off" }),
+        EventKind::Retune { enabled } => format!("retune {}", if *enabled { "allowed" } else { "forbidden" }),
+        EventKind::PumpScale { s, ramp_s } => format!("pump scale → {s} over {ramp_s} s"),
+    }
+}
+
+fn rel(est: f64, tru: f64) -> f64 {
+    if tru != 0.0 { (est - tru).abs() / tru.abs() } else { (est - tru).abs() }
+}
+
+/// Time (s, from `t0`) after which |est − true|/|true| of θ component `j` stays below
+/// `tol` until the end of `rows` (None if it never does).
+pub fn settle_time(rows: &[TraceRow], j: usize, tol: f64, t0: f64) -> Option<f64> {
+    let get = |r: &TraceRow| {
+        if j < 8 {
+            rel(r.theta_drive_est[j], r.theta_drive_true[j])
+        } else {
+            rel(r.theta_sense_est[j - 8], r.theta_sense_true[j - 8])
+        }
+    };
+    let rows: Vec<&TraceRow> = rows.iter().filter(|r| r.t_s >= t0).collect();
+    let last_bad = rows.iter().rposition(|r| !(get(r) < tol));
+    match last_bad {
+        None => Some(0.0),
+        Some(i) if i + 1 == rows.len() => None,
+        Some(i) => Some(rows[i + 1].t_s - t0),
+    }
+}
+
+fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimRun>) -> Value {
+    let last = main.trace.last().expect("a run has at least one sample");
+    let mut m = Map::new();
+    m.insert("scenario".into(), json!(sc.name));
+    m.insert("precision".into(), json!(opts.precision.name()));
+    m.insert("seed".into(), json!(opts.seed.unwrap_or(sc.seed)));
+    m.insert("sim_seconds".into(), json!(last.t_s));
+    let obj = |d: &[f64], s: &[f64]| json!({"drive": d, "sense": s});
+    m.insert("theta_true".into(), obj(&last.theta_drive_true, &last.theta_sense_true));
+    m.insert("theta_est".into(), obj(&last.theta_drive_est, &last.theta_sense_est));
+    let rd: Vec<f64> = (0..8).map(|j| rel(last.theta_drive_est[j], last.theta_drive_true[j])).collect();
+    let rs: Vec<f64> = (0..6).map(|j| rel(last.theta_sense_est[j], last.theta_sense_true[j])).collect();
+    m.insert("theta_rel_err".into(), obj(&rd, &rs));
+    let phys = |v: &[f64; 12]| {
+        let mut o = Map::new();
+        for (n, x) in PHYS_NAMES.iter().zip(v) {
+            o.insert((*n).into(), json!(x));
+        }
+        Value::Object(o)
+    };
+    m.insert("physical_true".into(), phys(&last.phys_true));
+    m.insert("physical_est".into(), phys(&last.phys_est));
+    m.insert("rate_dps_true".into(), json!(last.rate_dps_true));
+    m.insert("rate_dps_est".into(), json!(last.rate_dps_est));
+    m.insert("rate_rel_err".into(), json!(rel(last.rate_dps_est, last.rate_dps_true)));
+    m.insert("wy2_true_final".into(), json!(last.phys_true[4]));
+    m.insert("wy2_est_final".into(), json!(last.phys_est[4]));
+    m.insert("pump_centre_final_hz".into(), json!(main.pump_centre_final_hz));
+    // convergence after the dither starts
+    let t0 = main.dither_start_s;
+    let mut conv = Map::new();
+    for (tol, key) in [(0.1, "within_10pct_s"), (0.01, "within_1pct_s")] {
+        let mut o = Map::new();
+        for j in 0..14 {
+            let name = if j < 8 { THETA_DRIVE_NAMES[j] } else { THETA_SENSE_NAMES[j - 8] };
+            o.insert(name.into(), json!(settle_time(&main.trace, j, tol, t0)));
+        }
+        conv.insert(key.into(), Value::Object(o));
+    }
+    m.insert("convergence_after_dither_start".into(), Value::Object(conv));
+    let c = main.counters;
+    m.insert(
+        "counters".into(),
+        json!({
+            "samples": c.samples, "updates": c.updates, "bad_samples": c.bad_samples,
+            "resets_drive": c.resets_drive, "resets_sense": c.resets_sense,
+            "retunes": c.retunes, "retune_aborts": c.retune_aborts, "jumps": c.jumps,
+        }),
+    );
+    let measures = sc.measure_values(&main.trace, twin.map(|t| t.trace.as_slice()));
+    let mut vals = Map::new();
+    for (name, v) in &measures {
+        m.insert(name.clone(), json!(v));
+        if let Some(v) = v {
+            vals.insert(name.clone(), json!(v));
+        }
+    }
+    let get = |k: &str| vals.get(k).and_then(|v| v.as_f64());
+    if let (Some(a), Some(b)) = (get("sense_amp_detuned"), get("sense_amp_tuned")) {
+        m.insert("sense_amp_ratio".into(), json!(a / b));
+    }
+    if let (Some(before), Some(after)) = (get("sense_amp_before_drift"), get("sense_amp_after_drift")) {
+        m.insert("sense_amp_after_drift_ratio".into(), json!(after / before));
+    }
+    if let (Some(before), Some(after)) = (get("sense_amp_before_drift"), get("sense_amp_after_retune")) {
+        m.insert("sense_amp_after_retune_ratio".into(), json!(after / before));
+    }
+    if let Some(t) = twin {
+        m.insert("twin_pump_centre_final_hz".into(), json!(t.pump_centre_final_hz));
+    }
+    Value::Object(m)
 }
