@@ -40,9 +40,9 @@ pub struct RlsConfig {
     /// Anti-windup: forgetting stops while trace(P) exceeds this factor times the trace
     /// at the moment the estimate first settled (FINDINGS §4: 10×).
     pub trace_bound_factor: f64,
-    /// Re-linearise about the settled estimate when it settles and then every this many
-    /// seconds while it stays settled (0 disables): keeps the `f32` innovation small
-    /// when the design values are far from the device.
+    /// Re-linearise about the current estimate every this many seconds while the RLS
+    /// updates (0 disables): keeps the combined signals, and so the `f32` innovation,
+    /// small when the design values are far from the device. Exact in exact arithmetic.
     pub relinearize_s: f64,
 }
 
@@ -174,7 +174,7 @@ impl Config {
                 p0: 1e4,
                 p_reset: 1.0,
                 trace_bound_factor: 10.0,
-                relinearize_s: 2.0,
+                relinearize_s: 0.1,
             },
             monitor: MonitorConfig {
                 gate_startup_s: 0.5,
@@ -371,11 +371,12 @@ impl Default for Config {
 }
 
 /// Residual std of the drive rows at 1 pm/√Hz (DC, h1 Re, h1 Im, h3 Re, h3 Im),
-/// measured on the simulator's `identify` scenario with the true θ
-/// (`paragyro-sim calibrate`).
-pub const DEFAULT_ROW_SIGMA_DRIVE: [f64; 5] = [2.67e-6, 1.72e-7, 8.7e-8, 3.06e-5, 3.13e-5];
+/// measured with the true θ on the simulator's `identify` scenario at 512 RK4 steps per
+/// carrier period (so that the integrator's own error does not count as noise):
+/// `paragyro-sim calibrate identify --steps-per-period 512`.
+pub const DEFAULT_ROW_SIGMA_DRIVE: [f64; 5] = [3.42e-6, 1.78e-7, 8.61e-8, 3.30e-5, 3.22e-5];
 /// Same for the sense rows.
-pub const DEFAULT_ROW_SIGMA_SENSE: [f64; 5] = [2.81e-6, 3.0e-8, 4.6e-8, 3.1e-5, 3.0e-5];
+pub const DEFAULT_ROW_SIGMA_SENSE: [f64; 5] = [3.17e-6, 1.82e-8, 2.75e-8, 3.00e-5, 3.05e-5];
 
 /// A configuration field that failed validation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -435,6 +435,16 @@ impl<T: Real> Estimator<T> {
         self.sched.set_dither(on);
     }
 
+    /// Changes the peak pump-frequency dither, Hz (e.g. to keep it a fixed fraction of a
+    /// narrower parametric band). Ignored unless finite, ≥ 0 and below 5 % of the pump.
+    pub fn set_dither_pump_hz(&mut self, pump_hz: f64) {
+        if pump_hz.is_finite() && pump_hz >= 0.0 && pump_hz < 0.05 * self.pump_centre_hz() {
+            let amp = pump_hz / (2.0 * self.f0_hz);
+            self.sched.set_dither_amp(amp);
+            self.dither_rms = amp / core::f64::consts::SQRT_2;
+        }
+    }
+
     /// Allows or forbids the retune supervisor.
     pub fn set_retune(&mut self, on: bool) {
         self.sup.enabled = on;
@@ -447,6 +457,14 @@ impl<T: Real> Estimator<T> {
         self.rls1.set_trace_max(T::from_f64(p0 * 8.0 * 10.0));
         self.rls2.set_trace_max(T::from_f64(p0 * 6.0 * 10.0));
         self.bound_learned = false;
+    }
+
+    /// The scaled deviation is moderate (every |δθ_j| ≤ 2|θ_design,j|): not a wild
+    /// transient estimate that would make a poor linearisation point.
+    fn deviation_moderate(&self) -> bool {
+        let lim = T::from_f64(2.0);
+        self.rls1.estimate().iter().all(|v| v.is_finite() && v.abs() <= lim)
+            && self.rls2.estimate().iter().all(|v| v.is_finite() && v.abs() <= lim)
     }
 
     /// Moves the linearisation point θ_nom to the current estimate (δθ → 0). The
@@ -718,10 +736,7 @@ impl<T: Real> Estimator<T> {
         }
         self.was_settled = settled;
         let relin_every = (self.cfg.rls.relinearize_s * self.cfg.fs_hz) as u64;
-        if relin_every > 0
-            && settled
-            && (events & event::SETTLED != 0 || k >= self.last_relin + relin_every)
-        {
+        if relin_every > 0 && updated && k >= self.last_relin + relin_every && self.deviation_moderate() {
             self.relinearize();
             self.last_relin = k;
         }

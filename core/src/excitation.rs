@@ -118,6 +118,13 @@ impl<T: Real> Scheduler<T> {
         });
     }
 
+    /// Changes the dither amplitude (ω units, ≥ 0).
+    pub fn set_dither_amp(&mut self, amp: f64) {
+        if amp.is_finite() && amp >= 0.0 {
+            self.dither_amp = T::from_f64(amp);
+        }
+    }
+
     /// Switches the dither on or off (with the taper).
     pub fn set_dither(&mut self, on: bool) {
         self.dither_on = on;

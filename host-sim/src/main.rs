@@ -1,1 +1,436 @@
-fn main() {}
+//! `paragyro-sim`: the command line of the simulator.
+//!
+//! ```text
+//! paragyro-sim list                                   built-in scenarios
+//! paragyro-sim check <scenario|file.toml>             load and validate, print the resolved settings
+//! paragyro-sim run <scenario|file.toml> --out DIR     run, write summary.json, trace.csv, plots
+//!              [--seed N] [--precision f32|f64] [--quiet]
+//! paragyro-sim demo [--out DIR] [--precision ...]     the built-in drift-retune, with a summary
+//! ```
+//!
+//! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
+//! (or the command line is wrong). Errors are printed as `error: <message>` with their causes;
+//! no panic traces.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use paragyro_sim::report;
+use paragyro_sim::runner::{self, Precision, RunOptions};
+use paragyro_sim::scenario::Scenario;
+use paragyro_sim::trace::RunResult;
+
+/// Exit code of a failed run or output.
+const EXIT_RUN: u8 = 1;
+/// Exit code of a scenario that cannot be loaded.
+const EXIT_LOAD: u8 = 2;
+/// Runs shorter than this (simulated seconds, main + twin) get no progress bar.
+const PROGRESS_MIN_SIM_S: f64 = 2.0;
+
+/// Simulated parametrically excited MEMS gyroscope driving the paragyro core.
+#[derive(Parser, Debug)]
+#[command(name = "paragyro-sim", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// List the built-in scenarios.
+    List,
+    /// Load and validate a scenario (built-in name or TOML file) without running it.
+    Check {
+        /// Built-in scenario name or path to a scenario TOML file.
+        scenario: String,
+    },
+    /// Run a scenario; write summary.json, trace.csv and the plots.
+    Run {
+        /// Built-in scenario name or path to a scenario TOML file.
+        scenario: String,
+        /// Output directory (created if needed).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Override the scenario's noise seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Precision of the core.
+        #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
+        precision: PrecisionArg,
+        /// No progress bar.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
+    Demo {
+        /// Output directory (created if needed).
+        #[arg(long, value_name = "DIR", default_value = "out")]
+        out: PathBuf,
+        /// Precision of the core.
+        #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
+        precision: PrecisionArg,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum PrecisionArg {
+    /// `Estimator<f32>`, as on the chip.
+    F32,
+    /// `Estimator<f64>`, the host reference.
+    F64,
+}
+
+impl From<PrecisionArg> for Precision {
+    fn from(p: PrecisionArg) -> Self {
+        match p {
+            PrecisionArg::F32 => Precision::F32,
+            PrecisionArg::F64 => Precision::F64,
+        }
+    }
+}
+
+/// An error with its exit code.
+struct Failure {
+    code: u8,
+    error: anyhow::Error,
+}
+
+fn fail(code: u8) -> impl FnOnce(anyhow::Error) -> Failure {
+    move |error| Failure { code, error }
+}
+
+fn main() -> ExitCode {
+    // A bug must not print a backtrace at the user: one line, then exit 101.
+    std::panic::set_hook(Box::new(|info| {
+        eprintln!("error: internal error (please report): {info}");
+    }));
+    let cli = Cli::parse();
+    let mut stdout = std::io::stdout().lock();
+    let mut stderr = std::io::stderr();
+    let tty = std::io::stderr().is_terminal();
+    ExitCode::from(execute(cli, &mut stdout, &mut stderr, tty))
+}
+
+/// Runs a parsed command; prints errors on `err`; returns the exit code.
+fn execute(cli: Cli, out: &mut dyn Write, err: &mut dyn Write, progress_ok: bool) -> u8 {
+    match dispatch(cli, out, progress_ok) {
+        Ok(()) => 0,
+        Err(f) if f.code == 0 => 0, // stdout closed: nothing left to say
+        Err(f) => {
+            let _ = writeln!(err, "error: {:#}", f.error);
+            f.code
+        }
+    }
+}
+
+fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Failure> {
+    match cli.command {
+        Command::List => {
+            let list = Scenario::builtin_names();
+            let width = list.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
+            let mut text = String::from(
+                "Built-in scenarios (run with `paragyro-sim run <name> --out DIR`):\n",
+            );
+            for (name, desc) in list {
+                text.push_str(&format!("  {name:<width$}  {desc}\n"));
+            }
+            text.push_str(
+                "Or pass a scenario file (TOML, schema in host-sim/scenarios/README.md).\n",
+            );
+            say(out, &text)
+        }
+        Command::Check { scenario } => {
+            let sc = load(&scenario)?;
+            say(out, &describe(&sc))
+        }
+        Command::Run {
+            scenario,
+            out: dir,
+            seed,
+            precision,
+            quiet,
+        } => {
+            let sc = load(&scenario)?;
+            let opts = RunOptions {
+                precision: precision.into(),
+                seed,
+            };
+            let result = run_with_progress(&sc, &opts, progress_ok && !quiet)?;
+            let files = write(&dir, &result)?;
+            let mut text = format!("Wrote {} files to {}:\n", files.len(), dir.display());
+            for f in &files {
+                text.push_str(&format!("  {}\n", f.display()));
+            }
+            text.push_str(&report::short_summary(&result));
+            say(out, &text)
+        }
+        Command::Demo {
+            out: dir,
+            precision,
+        } => {
+            let sc = load("drift-retune")?;
+            say(
+                out,
+                &format!(
+                    "Demo: built-in scenario 'drift-retune' ({}).\n",
+                    sc.description
+                ),
+            )?;
+            let opts = RunOptions {
+                precision: precision.into(),
+                seed: None,
+            };
+            let result = run_with_progress(&sc, &opts, progress_ok)?;
+            say(out, &report::print_summary(&result))?;
+            let files = write(&dir, &result)?;
+            let mut text = format!("\nPlots and data in {}:\n", dir.display());
+            for f in &files {
+                text.push_str(&format!("  {}\n", f.display()));
+            }
+            say(out, &text)
+        }
+    }
+}
+
+fn load(name_or_path: &str) -> Result<Scenario, Failure> {
+    Scenario::load(name_or_path).map_err(|e| Failure {
+        code: EXIT_LOAD,
+        error: anyhow::Error::new(e),
+    })
+}
+
+fn write(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>, Failure> {
+    report::write_outputs(dir, result)
+        .with_context(|| format!("cannot write the outputs to {}", dir.display()))
+        .map_err(fail(EXIT_RUN))
+}
+
+/// Writes to stdout. A closed pipe (`paragyro-sim demo | head`) ends the command quietly;
+/// other write errors are errors (exit 1); never a panic.
+fn say(out: &mut dyn Write, text: &str) -> Result<(), Failure> {
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(Failure {
+            code: 0,
+            error: anyhow::Error::new(e),
+        }),
+        Err(e) => Err(Failure {
+            code: EXIT_RUN,
+            error: anyhow::Error::new(e).context("cannot write to stdout"),
+        }),
+    }
+}
+
+/// Runs with an indicatif bar on stderr (only when `show` and the run is long enough).
+fn run_with_progress(sc: &Scenario, opts: &RunOptions, show: bool) -> Result<RunResult, Failure> {
+    let sim_s = sc.duration_s * if sc.twin.is_some() { 2.0 } else { 1.0 };
+    let bar = if show && sim_s >= PROGRESS_MIN_SIM_S {
+        let bar = ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::stderr());
+        let style = ProgressStyle::with_template(
+            "{msg} [{bar:40.cyan/blue}] {percent:>3}%  {elapsed_precise} (eta {eta})",
+        )
+        .map(|s| s.progress_chars("=> "))
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+        bar.set_style(style);
+        bar.set_message(format!(
+            "{} ({})",
+            sc.name,
+            match opts.precision {
+                Precision::F32 => "f32",
+                Precision::F64 => "f64",
+            }
+        ));
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut progress = |f: f64| {
+        if f.is_finite() {
+            bar.set_position((f.clamp(0.0, 1.0) * 1000.0).round() as u64);
+        }
+    };
+    let result = runner::run(sc, opts, &mut progress);
+    bar.finish_and_clear();
+    result
+        .with_context(|| format!("the run of scenario '{}' failed", sc.name))
+        .map_err(fail(EXIT_RUN))
+}
+
+/// The resolved settings of a scenario (for `check`).
+fn describe(sc: &Scenario) -> String {
+    let mut s = format!(
+        "ok: '{}' from {}\n  {}\n  duration {} s, seed {}, f0 {:.3} Hz, {} steps/period, noise {} pm/√Hz, lock-in {} Hz order {}\n",
+        sc.name,
+        sc.source,
+        sc.description,
+        sc.duration_s,
+        sc.seed,
+        sc.sim.f0_hz,
+        sc.sim.steps_per_period,
+        sc.sim.noise_pm_rthz,
+        sc.sim.lockin_lpf_hz,
+        sc.sim.lockin_lpf_order
+    );
+    let e = &sc.estimator;
+    s.push_str(&format!(
+        "  pump centre {:.3} Hz, dither ±{} Hz at {} Hz from {} s, gate {} s, retune {}, forgetting {}\n",
+        sc.pump_centre_hz(),
+        e.dither_pump_hz,
+        e.dither_freq_hz,
+        e.dither_start_s,
+        e.gate_startup_s,
+        e.retune,
+        e.forgetting
+    ));
+    s.push_str(&format!(
+        "  plant: wy2 {}, rate {} °/s, accel {} / {} m/s²\n",
+        sc.plant.wy2, sc.plant.rate_dps, sc.plant.accel_x_mps2, sc.plant.accel_y_mps2
+    ));
+    for ev in &sc.events {
+        let what = match sc.pump_jump_centre_hz(ev) {
+            Some(c) => format!("{} ({c:.3} Hz)", ev.kind),
+            None => ev.kind.to_string(),
+        };
+        s.push_str(&format!("  event t = {} s: {what}\n", ev.t_s));
+    }
+    for m in &sc.measures {
+        s.push_str(&format!(
+            "  measure '{}': {:?} run, {}–{} s\n",
+            m.name, m.run, m.from_s, m.to_s
+        ));
+    }
+    if let Some(t) = sc.twin_scenario() {
+        s.push_str(&format!(
+            "  twin: retune {}, wy2 {}\n",
+            t.estimator.retune, t.plant.wy2
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Parses and executes a command line; returns (code, stdout, stderr).
+    fn cli(args: &[&str]) -> (u8, String, String) {
+        let mut argv = vec!["paragyro-sim"];
+        argv.extend_from_slice(args);
+        let parsed = Cli::try_parse_from(argv).unwrap();
+        let (mut out, mut err) = (Vec::new(), Vec::new());
+        let code = execute(parsed, &mut out, &mut err, false);
+        (
+            code,
+            String::from_utf8(out).unwrap(),
+            String::from_utf8(err).unwrap(),
+        )
+    }
+
+    #[test]
+    fn list_shows_every_builtin() {
+        let (code, out, err) = cli(&["list"]);
+        assert_eq!(code, 0, "{err}");
+        for (name, _) in Scenario::builtin_names() {
+            assert!(out.contains(name), "{out}");
+        }
+    }
+
+    #[test]
+    fn run_unknown_scenario_exits_2_listing_builtins() {
+        let dir = std::env::temp_dir().join("paragyro-cli-test-unknown");
+        let (code, out, err) = cli(&["run", "nonexistent", "--out", dir.to_str().unwrap()]);
+        assert_eq!(code, EXIT_LOAD);
+        assert!(out.is_empty());
+        assert!(
+            err.starts_with("error: unknown scenario 'nonexistent'"),
+            "{err}"
+        );
+        for (name, _) in Scenario::builtin_names() {
+            assert!(err.contains(name), "{err}");
+        }
+        assert!(!dir.exists(), "nothing written on a load error");
+    }
+
+    #[test]
+    fn run_bad_file_exits_2_with_file_and_line() {
+        let path =
+            std::env::temp_dir().join(format!("paragyro-cli-bad-{}.toml", std::process::id()));
+        std::fs::write(
+            &path,
+            "name = \"x\"\nduration_s = 1.0\n[plant]\nwy2 = \"high\"\n",
+        )
+        .unwrap();
+        let p = path.to_str().unwrap();
+        let (code, _, err) = cli(&["run", p, "--out", "/nonexistent-dir"]);
+        assert_eq!(code, EXIT_LOAD);
+        assert!(err.starts_with(&format!("error: {p}:4:")), "{err}");
+        assert!(err.contains("plant.wy2"), "{err}");
+        let (code, _, err) = cli(&["check", p]);
+        assert_eq!(code, EXIT_LOAD, "{err}");
+        let _ = std::fs::remove_file(&path);
+    }
+
+    #[test]
+    fn check_builtin() {
+        let (code, out, err) = cli(&["check", "paper-switch"]);
+        assert_eq!(code, 0, "{err}");
+        assert!(out.starts_with("ok: 'paper-switch' from built-in"), "{out}");
+        assert!(
+            out.contains("pump jump to the sense resonance (26"),
+            "{out}"
+        );
+    }
+
+    #[test]
+    fn command_line_parsing() {
+        let c = Cli::try_parse_from(["paragyro-sim", "run", "identify", "--out", "o"]).unwrap();
+        match c.command {
+            Command::Run {
+                precision, seed, ..
+            } => {
+                assert_eq!(precision, PrecisionArg::F32);
+                assert_eq!(seed, None);
+            }
+            other => panic!("{other:?}"),
+        }
+        let c = Cli::try_parse_from([
+            "paragyro-sim",
+            "run",
+            "x.toml",
+            "--out",
+            "o",
+            "--seed",
+            "7",
+            "--precision",
+            "f64",
+        ])
+        .unwrap();
+        assert!(matches!(
+            c.command,
+            Command::Run {
+                seed: Some(7),
+                precision: PrecisionArg::F64,
+                ..
+            }
+        ));
+        let c = Cli::try_parse_from(["paragyro-sim", "demo"]).unwrap();
+        assert!(matches!(c.command, Command::Demo { ref out, .. } if out == Path::new("out")));
+        // Missing --out, bad precision: clap errors (exit code 2 from clap itself).
+        assert!(Cli::try_parse_from(["paragyro-sim", "run", "identify"]).is_err());
+        let e = Cli::try_parse_from([
+            "paragyro-sim",
+            "run",
+            "a",
+            "--out",
+            "o",
+            "--precision",
+            "f16",
+        ])
+        .unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+    }
+}

@@ -203,7 +203,12 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
                         est.command_pump_centre(c, true);
                     }
                 }
-                EventKind::Dither { enabled } => est.set_dither(enabled),
+                EventKind::Dither { enabled, pump_hz } => {
+                    if let Some(a) = pump_hz {
+                        est.set_dither_pump_hz(a);
+                    }
+                    est.set_dither(enabled);
+                }
                 EventKind::Retune { enabled } => est.set_retune(enabled),
                 _ => {}
             }
@@ -301,7 +306,7 @@ fn describe(k: &EventKind) -> String {
             None if *to_sense_resonance => "pump jump to the sense resonance".into(),
             None => "pump jump".into(),
         },
-        EventKind::Dither { enabled } => format!("dither {}", if *enabled { "on" } else { "off" }),
+        EventKind::Dither { .. } => k.to_string(),
         EventKind::Retune { enabled } => format!("retune {}", if *enabled { "allowed" } else { "forbidden" }),
         EventKind::PumpScale { s, ramp_s } => format!("pump scale → {s} over {ramp_s} s"),
     }
@@ -401,4 +406,77 @@ fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimR
         m.insert("twin_pump_centre_final_hz".into(), json!(t.pump_centre_final_hz));
     }
     Value::Object(m)
+}
+
+/// Residual standard deviation of each regression row with the TRUE θ, per 1 pm/√Hz of
+/// front-end noise: the row weights (`Config::row_sigma_*`) for a device like the
+/// scenario's. Runs the scenario with the `f64` core and evaluates
+/// `y − Φ·(θ_true − θ_nom)` on every sample from `from_s` on.
+pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [f64; 5])> {
+    let cfg = core_config(sc);
+    let mut est: Estimator<f64> = cfg.build().map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let f0 = sc.sim.f0_hz;
+    let w0 = sc.omega0_rad_s();
+    let fs = cfg.fs_hz;
+    let simcfg = SimConfig {
+        omega0_rad_s: w0,
+        fs_hz: fs,
+        steps_per_period: sc.sim.steps_per_period,
+        omega_max: omega_max(sc, &cfg),
+        lpf_order: sc.sim.lockin_lpf_order,
+        lpf_hz: sc.sim.lockin_lpf_hz,
+        noise_density: sc.sim.noise_pm_rthz * 1e-6,
+        seed: sc.seed,
+    };
+    let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
+    let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let n = (sc.duration_s * fs).round() as u64;
+    let accel_si = L0_M * w0 * w0;
+    let mut pump_hz = est.initial_pump_hz();
+    let (mut s1, mut s2) = ([0.0f64; 5], [0.0f64; 5]);
+    let mut count = 0usize;
+    for k in 0..=n {
+        let t = k as f64 / fs;
+        let pa = sc.plant_at(t);
+        let li = sim.lockin();
+        let c = |p: (f64, f64)| Cplx::new(p.0, p.1);
+        let sample = Sample {
+            lockin: Lockin { x0_um: li.x0, x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])], y0_um: li.y0, y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])] },
+            accel_mps2: [pa.accel_x * accel_si, pa.accel_y * accel_si],
+            pump_hz,
+            pump_scale: sc.pump_scale_at(t),
+        };
+        let (n1, n2) = est.nominal_theta();
+        let out = est.step(&sample);
+        if t >= from_s {
+            let rows = est.last_rows();
+            for r in 0..5 {
+                let mut e1 = rows.drive_y[r];
+                for j in 0..8 {
+                    e1 -= rows.drive_phi[r][j] * (pa.theta_drive[j] - n1[j]);
+                }
+                let mut e2 = rows.sense_y[r];
+                for j in 0..6 {
+                    e2 -= rows.sense_phi[r][j] * (pa.theta_sense[j] - n2[j]);
+                }
+                s1[r] += e1 * e1;
+                s2[r] += e2 * e2;
+            }
+            count += 1;
+        }
+        if k == n {
+            break;
+        }
+        let t_next = (k + 1) as f64 / fs;
+        let pa1 = sc.plant_at(t_next);
+        let theta = Theta { drive: pa.theta_drive, sense: pa.theta_sense };
+        let u0 = PlantInputs { omega: pump_hz / (2.0 * f0), s: sc.pump_scale_at(t), ax: pa.accel_x, ay: pa.accel_y };
+        let u1 = PlantInputs { omega: out.pump_hz_next / (2.0 * f0), s: sc.pump_scale_at(t_next), ax: pa1.accel_x, ay: pa1.accel_y };
+        sim.advance(&theta, &u0, &u1);
+        pump_hz = out.pump_hz_next;
+    }
+    anyhow::ensure!(count > 10, "calibration window too short");
+    let noise = if sc.sim.noise_pm_rthz > 0.0 { sc.sim.noise_pm_rthz } else { 1.0 };
+    let f = |s: [f64; 5]| s.map(|v| (v / count as f64).sqrt() / noise);
+    Ok((f(s1), f(s2)))
 }
