@@ -12,7 +12,15 @@ pub fn run_builtin(name: &str, precision: Precision, duration_s: Option<f64>) ->
         sc.measures.retain(|m| m.to_s <= d);
         sc.events.retain(|e| e.t_s <= d);
     }
-    run(&sc, &RunOptions { precision, seed: None }, &mut |_| {}).expect("run failed")
+    run(
+        &sc,
+        &RunOptions {
+            precision,
+            seed: None,
+        },
+        &mut |_| {},
+    )
+    .expect("run failed")
 }
 
 /// |est − true| / |true|.
@@ -31,14 +39,23 @@ pub fn theta_err(r: &TraceRow, j: usize) -> f64 {
 
 /// Name of θ component j.
 pub fn theta_name(j: usize) -> String {
-    if j < 8 { format!("θ1{}", j + 1) } else { format!("θ2{}", j - 7) }
+    if j < 8 {
+        format!("θ1{}", j + 1)
+    } else {
+        format!("θ2{}", j - 7)
+    }
 }
 
 /// The first time ≥ `t0` from which every θ stays within `tol` until `t_end`
 /// (exclusive), or None.
 pub fn all_within_from(trace: &[TraceRow], tol: f64, t0: f64, t_end: f64) -> Option<f64> {
-    let rows: Vec<&TraceRow> = trace.iter().filter(|r| r.t_s >= t0 && r.t_s < t_end).collect();
-    let bad = rows.iter().rposition(|r| (0..14).any(|j| !(theta_err(r, j) < tol)));
+    let rows: Vec<&TraceRow> = trace
+        .iter()
+        .filter(|r| r.t_s >= t0 && r.t_s < t_end)
+        .collect();
+    let bad = rows
+        .iter()
+        .rposition(|r| (0..14).any(|j| !(theta_err(r, j) < tol)));
     match bad {
         None => Some(t0),
         Some(i) if i + 1 == rows.len() => None,

@@ -20,13 +20,24 @@ fn identify_full_length_f32_and_f64() {
                 _ => 1e-3,
             };
             let e = theta_err(last, j);
-            assert!(e <= lim, "{precision:?}: {} error {e:.3e} > {lim:e}", theta_name(j));
+            assert!(
+                e <= lim,
+                "{precision:?}: {} error {e:.3e} > {lim:e}",
+                theta_name(j)
+            );
         }
         let re = rel(last.rate_dps_est, 150.0);
-        assert!(re <= 3e-3, "{precision:?}: rate {} °/s ({re:.2e})", last.rate_dps_est);
+        assert!(
+            re <= 3e-3,
+            "{precision:?}: rate {} °/s ({re:.2e})",
+            last.rate_dps_est
+        );
         // all θ within 10 % by 0.2 s after the dither starts (t = 1 s), and stay there
         let t = all_within_from(&r.trace, 0.10, 1.0, 10.0).expect("never all within 10 %");
-        assert!(t <= 1.2, "{precision:?}: all θ within 10 % only from {t:.3} s");
+        assert!(
+            t <= 1.2,
+            "{precision:?}: all θ within 10 % only from {t:.3} s"
+        );
         // no parameter change: the change detector stays quiet, no retune needed
         assert_eq!(r.summary["counters"]["resets_drive"], 0, "{precision:?}");
         assert_eq!(r.summary["counters"]["resets_sense"], 0, "{precision:?}");
@@ -41,17 +52,25 @@ fn identify_full_length_f32_and_f64() {
 fn f32_tracks_f64() {
     let a = run_builtin("identify", Precision::F32, Some(6.0));
     let b = run_builtin("identify", Precision::F64, Some(6.0));
-    let rms = |r: &paragyro_sim::trace::RunResult, f: &dyn Fn(&paragyro_sim::trace::TraceRow) -> f64| {
+    let rms = |r: &paragyro_sim::trace::RunResult,
+               f: &dyn Fn(&paragyro_sim::trace::TraceRow) -> f64| {
         let rows: Vec<_> = r.trace.iter().filter(|x| x.t_s >= 4.0).collect();
         (rows.iter().map(|x| f(x).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
     };
     let rate = |x: &paragyro_sim::trace::TraceRow| rel(x.rate_dps_est, 150.0);
     let (ea, eb) = (rms(&a, &rate), rms(&b, &rate));
-    assert!(ea <= 1.5 * eb, "rms rate error f32 {ea:.2e} vs f64 {eb:.2e}");
+    assert!(
+        ea <= 1.5 * eb,
+        "rms rate error f32 {ea:.2e} vs f64 {eb:.2e}"
+    );
     for j in [3usize, 6] {
         let f = move |x: &paragyro_sim::trace::TraceRow| theta_err(x, j);
         let (x, y) = (rms(&a, &f), rms(&b, &f));
-        assert!(x <= 1.5 * y, "{}: rms error f32 {x:.2e} vs f64 {y:.2e}", theta_name(j));
+        assert!(
+            x <= 1.5 * y,
+            "{}: rms error f32 {x:.2e} vs f64 {y:.2e}",
+            theta_name(j)
+        );
     }
     let (la, lb) = (a.trace.last().unwrap(), b.trace.last().unwrap());
     for j in 0..14 {
@@ -65,9 +84,17 @@ fn f32_tracks_f64() {
         } else {
             (la.theta_sense_est[j - 8], lb.theta_sense_est[j - 8])
         };
-        let tru = if j < 8 { la.theta_drive_true[j] } else { la.theta_sense_true[j - 8] };
+        let tru = if j < 8 {
+            la.theta_drive_true[j]
+        } else {
+            la.theta_sense_true[j - 8]
+        };
         let d = rel(x, tru) - rel(y, tru);
-        assert!(d.abs() <= 0.25 * lim, "{}: f32 {x:e} vs f64 {y:e}", theta_name(j));
+        assert!(
+            d.abs() <= 0.25 * lim,
+            "{}: f32 {x:e} vs f64 {y:e}",
+            theta_name(j)
+        );
     }
 }
 
@@ -79,24 +106,44 @@ fn drift_retune() {
     let r = run_builtin("drift-retune", Precision::F32, None);
     for row in r.trace.iter().filter(|row| row.t_s >= 3.0) {
         let e = rel(row.phys_est[4], 1.03);
-        assert!(e <= 1e-4, "ω̂y² = {} at t = {:.3} s ({e:.2e})", row.phys_est[4], row.t_s);
+        assert!(
+            e <= 1e-4,
+            "ω̂y² = {} at t = {:.3} s ({e:.2e})",
+            row.phys_est[4],
+            row.t_s
+        );
     }
     let s = &r.summary;
     let before = s["sense_amp_before_drift"].as_f64().unwrap();
     let after_drift = s["sense_amp_after_drift"].as_f64().unwrap();
     let after_retune = s["sense_amp_after_retune"].as_f64().unwrap();
     assert!((before - 1.496).abs() < 0.01, "before drift {before}");
-    assert!(after_retune >= before, "after retune {after_retune} < before {before}");
+    assert!(
+        after_retune >= before,
+        "after retune {after_retune} < before {before}"
+    );
     let loss = after_drift / before;
-    assert!(loss < 0.6 && loss > 0.45, "twin without retune: {loss:.3} of the amplitude (prototype 0.52)");
-    assert!(s["counters"]["retunes"].as_u64().unwrap() >= 1, "no retune happened");
-    assert!(s["counters"]["resets_sense"].as_u64().unwrap() >= 1, "the drift was not detected");
+    assert!(
+        loss < 0.6 && loss > 0.45,
+        "twin without retune: {loss:.3} of the amplitude (prototype 0.52)"
+    );
+    assert!(
+        s["counters"]["retunes"].as_u64().unwrap() >= 1,
+        "no retune happened"
+    );
+    assert!(
+        s["counters"]["resets_sense"].as_u64().unwrap() >= 1,
+        "the drift was not detected"
+    );
     let wy2 = s["wy2_est_final"].as_f64().unwrap();
     assert!(rel(wy2, 1.03) < 1e-5);
     // the pump centre now sits at 2·sqrt(ω̂y²)·f0
     let f0 = 2.618 / 3.8581e-5 / (2.0 * std::f64::consts::PI);
     let centre = s["pump_centre_final_hz"].as_f64().unwrap();
-    assert!((centre - 2.0 * 1.03f64.sqrt() * f0).abs() < 1.0, "pump centre {centre} Hz");
+    assert!(
+        (centre - 2.0 * 1.03f64.sqrt() * f0).abs() < 1.0,
+        "pump centre {centre} Hz"
+    );
 }
 
 /// `paper-switch`: after each switch every θ within 10 % within 1.5 s; θ14 and θ17
@@ -106,7 +153,11 @@ fn paper_switch() {
     let r = run_builtin("paper-switch", Precision::F32, None);
     for (ts, te) in [(3.0, 6.0), (6.0, 9.0 + 1e-9)] {
         let t = all_within_from(&r.trace, 0.10, ts, te).unwrap_or(f64::INFINITY);
-        assert!(t - ts <= 1.5, "switch at {ts} s: all θ within 10 % only after {:.3} s", t - ts);
+        assert!(
+            t - ts <= 1.5,
+            "switch at {ts} s: all θ within 10 % only after {:.3} s",
+            t - ts
+        );
     }
     let last = r.trace.last().unwrap();
     for j in [3, 6] {
