@@ -26,6 +26,14 @@ pub struct DitherConfig {
     pub start_s: f64,
     /// Raised-cosine taper of the dither amplitude when it is switched on or off, s.
     pub taper_s: f64,
+    /// Peak fractional modulation of the pump voltage scale s = (V/V0)² that runs with
+    /// the frequency dither (0 disables). θ17 (β3) is told apart from θ15 and θ16 only by
+    /// how the terms scale with amplitude and with s; ±10 % of s makes its error 3× smaller
+    /// (README, "Excitation"). Smooth (sinusoidal), never stepped: amplitude steps bias
+    /// the rows (FINDINGS §3.2).
+    pub scale_frac: f64,
+    /// Frequency of the pump-scale modulation, Hz (incommensurate with `freq_hz`).
+    pub scale_freq_hz: f64,
 }
 
 /// Recursive least squares settings (both axes).
@@ -161,9 +169,11 @@ impl Config {
             dither: DitherConfig {
                 enabled: true,
                 pump_hz: 2.0e-3 * f0_hz,
-                freq_hz: 2.0,
+                freq_hz: 5.0,
                 start_s: 1.0,
                 taper_s: 0.1,
+                scale_frac: 0.1,
+                scale_freq_hz: 1.3,
             },
             svf_hz: 10.0,
             noise_pm_rthz: 1.0,
@@ -291,6 +301,16 @@ impl Config {
         }
         nonneg(d.start_s, "dither.start_s")?;
         nonneg(d.taper_s, "dither.taper_s")?;
+        if !(d.scale_frac.is_finite() && (0.0..=0.3).contains(&d.scale_frac)) {
+            return Err(E::new("dither.scale_frac", "must be in [0, 0.3]"));
+        }
+        pos(d.scale_freq_hz, "dither.scale_freq_hz")?;
+        if d.scale_freq_hz > self.fs_hz / 20.0 {
+            return Err(E::new(
+                "dither.scale_freq_hz",
+                "must be slow: at most fs_hz/20",
+            ));
+        }
         pos(self.svf_hz, "svf_hz")?;
         if self.svf_hz > self.fs_hz / 10.0 {
             return Err(E::new("svf_hz", "must be at most fs_hz/10"));

@@ -209,6 +209,10 @@ pub mod event {
 pub struct StepOutput {
     /// Pump frequency to command for the next sample instant, Hz.
     pub pump_hz_next: f64,
+    /// Multiplier of the pump voltage scale s = (V/V0)² to command for the next sample
+    /// instant (the amplitude part of the excitation; 1 when off). The pump voltage is
+    /// V0·√(s_base · pump_scale_next).
+    pub pump_scale_next: f64,
     /// Health after this sample.
     pub health: Health,
     /// Events of this step (see [`event`]).
@@ -251,6 +255,7 @@ pub struct Estimator<T: Real> {
     rep_co: ReplicaCoeffs<T>,
     rows: RowBuilder<T>,
     last_rows: RowSet<T>,
+    last_known: Known<T>,
     rls1: Rls<T, 8>,
     rls2: Rls<T, 6>,
     det1: ChangeDetector,
@@ -351,6 +356,7 @@ impl<T: Real> Estimator<T> {
             rep_co,
             rows: RowBuilder::new(w_svf, ts, nom),
             last_rows: RowSet::default(),
+            last_known: Known::default(),
             rls1: Rls::new(set1),
             rls2: Rls::new(set2),
             det1: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
@@ -365,7 +371,8 @@ impl<T: Real> Estimator<T> {
                 cfg.dither.taper_s * cfg.fs_hz,
                 samples(cfg.dither.start_s),
                 cfg.dither.enabled,
-            ),
+            )
+            .with_scale_dither(cfg.dither.scale_frac, cfg.dither.scale_freq_hz / cfg.fs_hz),
             sup,
             k: 0,
             jump_gate_until: 0,
@@ -529,6 +536,23 @@ impl<T: Real> Estimator<T> {
         (t1, t2)
     }
 
+    /// 1-σ uncertainty of θ̂ relative to |θ_design| (the square roots of the diagonal of
+    /// the column-scaled covariance; rows are weighted to unit noise, so P is the
+    /// estimate's covariance when the configured row noise is right).
+    pub fn theta_rel_sigma(&self) -> ([f64; 8], [f64; 6]) {
+        let p1 = self.rls1.covariance();
+        let p2 = self.rls2.covariance();
+        let mut s1 = [0.0; 8];
+        let mut s2 = [0.0; 6];
+        for j in 0..8 {
+            s1[j] = libm::sqrt(p1[j][j].to_f64().max(0.0));
+        }
+        for j in 0..6 {
+            s2[j] = libm::sqrt(p2[j][j].to_f64().max(0.0));
+        }
+        (s1, s2)
+    }
+
     /// The physical parameters from θ̂ (corrected Table 3).
     pub fn physical(&self) -> Physical {
         let (t1, t2) = self.theta();
@@ -561,6 +585,11 @@ impl<T: Real> Estimator<T> {
     /// diagnostics and calibration.
     pub fn last_rows(&self) -> &RowSet<T> {
         &self.last_rows
+    }
+
+    /// The last sample's known signals after the replica low-pass (diagnostics).
+    pub fn last_known(&self) -> &Known<T> {
+        &self.last_known
     }
 
     /// Row weights (drive, sense) = 1/σ.
@@ -640,6 +669,7 @@ impl<T: Real> Estimator<T> {
             let dev = self.sched.command(self.k);
             return StepOutput {
                 pump_hz_next: self.pump_hz_of(dev),
+                pump_scale_next: self.sched.scale_command(),
                 health: self.health,
                 events,
                 updated: false,
@@ -670,6 +700,7 @@ impl<T: Real> Estimator<T> {
             ay: rep.ay.update(&rep.co, acc[1]),
         };
         let exc_rms = self.exc.push(f_dom.to_f64());
+        self.last_known = known;
 
         // ---- rows
         let rows = self.rows.push(&env, &known);
@@ -819,6 +850,7 @@ impl<T: Real> Estimator<T> {
         let dev = self.sched.command(self.k);
         StepOutput {
             pump_hz_next: self.pump_hz_of(dev),
+            pump_scale_next: self.sched.scale_command(),
             health,
             events,
             updated,

@@ -61,6 +61,10 @@ pub struct Scheduler<T> {
     env: f64,
     env_step: f64,
     dither_start_k: u64,
+    scale_amp: f64,
+    scale_step: f64,
+    scale_phase: f64,
+    scale_cmd: f64,
 }
 
 impl<T: Real> Scheduler<T> {
@@ -89,7 +93,24 @@ impl<T: Real> Scheduler<T> {
                 1.0
             },
             dither_start_k: start_k,
+            scale_amp: 0.0,
+            scale_step: 0.0,
+            scale_phase: 0.0,
+            scale_cmd: 1.0,
         }
+    }
+
+    /// Adds a sinusoidal modulation of the pump voltage scale s (peak fraction `frac`,
+    /// `cycles_per_sample`), switched and tapered together with the frequency dither.
+    pub fn with_scale_dither(mut self, frac: f64, cycles_per_sample: f64) -> Self {
+        self.scale_amp = frac;
+        self.scale_step = 2.0 * core::f64::consts::PI * cycles_per_sample;
+        self
+    }
+
+    /// Multiplier of the pump voltage scale s at the last commanded sample (1 = none).
+    pub fn scale_command(&self) -> f64 {
+        self.scale_cmd
     }
 
     /// Centre deviation (from ω_ref) at the last computed sample.
@@ -157,14 +178,21 @@ impl<T: Real> Scheduler<T> {
         }
         let shape = 0.5 - 0.5 * libm::cos(core::f64::consts::PI * self.env);
         let mut d = 0.0;
+        self.scale_cmd = 1.0;
         if self.env > 0.0 {
             d = (self.dither_amp.to_f64()) * shape * libm::sin(self.dither_phase.to_f64());
             self.dither_phase += self.dither_step;
             if self.dither_phase.to_f64() > 2.0 * core::f64::consts::PI {
                 self.dither_phase -= T::from_f64(2.0 * core::f64::consts::PI);
             }
+            self.scale_cmd = 1.0 + self.scale_amp * shape * libm::sin(self.scale_phase);
+            self.scale_phase += self.scale_step;
+            if self.scale_phase > 2.0 * core::f64::consts::PI {
+                self.scale_phase -= 2.0 * core::f64::consts::PI;
+            }
         } else {
             self.dither_phase = T::ZERO;
+            self.scale_phase = 0.0;
         }
         self.centre + d
     }

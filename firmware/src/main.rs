@@ -33,7 +33,11 @@ mod fw {
         let mut cp = cortex_m::Peripherals::take().unwrap();
         let ok = self_check(&mut cp.SYST);
         defmt::info!("{}", if ok { "PASS" } else { "FAIL" });
-        debug::exit(if ok { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
         #[allow(clippy::empty_loop)]
         loop {}
     }
@@ -48,9 +52,17 @@ mod fw {
         let sample = Sample {
             lockin: Lockin {
                 x0_um: 0.0204,
-                x_um: [Cplx::new(1.2, -1.27), Cplx::new(0.0, 0.0), Cplx::new(0.001, 0.002)],
+                x_um: [
+                    Cplx::new(1.2, -1.27),
+                    Cplx::new(0.0, 0.0),
+                    Cplx::new(0.001, 0.002),
+                ],
                 y0_um: 0.0207,
-                y_um: [Cplx::new(0.9, 1.2), Cplx::new(0.0, 0.0), Cplx::new(0.0005, -0.001)],
+                y_um: [
+                    Cplx::new(0.9, 1.2),
+                    Cplx::new(0.0, 0.0),
+                    Cplx::new(0.0005, -0.001),
+                ],
             },
             accel_mps2: [98.0665, 98.0665],
             pump_hz: est.initial_pump_hz(),
@@ -76,12 +88,17 @@ mod fw {
             s.lockin.x0_um = sample.lockin.x0_um + d * 0.1;
             s.lockin.y0_um = sample.lockin.y0_um + d * 0.1;
             s.pump_hz = out.pump_hz_next;
-            if !(out.pump_hz_next.is_finite() && out.pump_hz_next > 0.0) || !out.health.inputs_valid {
+            if !(out.pump_hz_next.is_finite() && out.pump_hz_next > 0.0) || !out.health.inputs_valid
+            {
                 ok = false;
             }
         }
         let instr_per_tick = total * 1_000_000_000 / SYSTICK_HZ / n as u64;
-        defmt::info!("ticks: {}, approx. instructions per tick: {}", n, instr_per_tick);
+        defmt::info!(
+            "ticks: {}, approx. instructions per tick: {}",
+            n,
+            instr_per_tick
+        );
         let c = est.counters();
         defmt::info!("counters: {}", c);
         ok && c.samples == n && c.bad_samples == 0

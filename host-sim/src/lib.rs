@@ -1,9 +1,12 @@
 //! paragyro-sim: the simulated gyro and the tools around the core.
 #![forbid(unsafe_code)]
+// Index loops over small fixed arrays read like the math they implement.
+#![allow(clippy::needless_range_loop)]
 
 pub mod lockin;
 pub mod plant;
 pub mod report;
+pub mod results;
 pub mod runner;
 pub mod scenario;
 pub mod trace;

@@ -6,6 +6,9 @@
 //! paragyro-sim run <scenario|file.toml> --out DIR     run, write summary.json, trace.csv, plots
 //!              [--seed N] [--precision f32|f64] [--quiet]
 //! paragyro-sim demo [--out DIR] [--precision ...]     the built-in drift-retune, with a summary
+//! paragyro-sim results                                every built-in, f32 and f64: the README table
+//! paragyro-sim calibrate <scenario|file.toml>         row noise (weights) with the true θ
+//!              [--from S] [--steps-per-period N]
 //! ```
 //!
 //! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
@@ -64,6 +67,20 @@ enum Command {
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Run every built-in scenario with the f32 and the f64 core; print a Markdown table.
+    Results,
+    /// Measure the residual std of each regression row with the true θ (the row weights
+    /// `row_sigma_*` of the core's configuration) on a scenario.
+    Calibrate {
+        /// Built-in scenario name or path to a scenario TOML file.
+        scenario: String,
+        /// Start of the measurement window, s (after start-up and the dither onset).
+        #[arg(long, default_value_t = 2.0)]
+        from: f64,
+        /// RK4 steps per carrier period (high, so the integrator's error is not counted as noise).
+        #[arg(long, default_value_t = 512)]
+        steps_per_period: usize,
     },
     /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
     Demo {
@@ -167,6 +184,40 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             }
             text.push_str(&report::short_summary(&result));
             say(out, &text)
+        }
+        Command::Results => {
+            let mut err = std::io::stderr();
+            let md = paragyro_sim::results::results_table(&mut |what| {
+                let _ = writeln!(err, "running {what} ...");
+            })
+            .map_err(fail(EXIT_RUN))?;
+            say(out, &md)
+        }
+        Command::Calibrate {
+            scenario,
+            from,
+            steps_per_period,
+        } => {
+            let mut sc = load(&scenario)?;
+            sc.sim.steps_per_period = steps_per_period;
+            let (d, s) = runner::calibrate_rows(&sc, from).map_err(fail(EXIT_RUN))?;
+            let f = |v: [f64; 5]| {
+                v.iter()
+                    .map(|x| format!("{x:.3e}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            say(
+                out,
+                &format!(
+                    "Residual std per row with the true θ, per 1 pm/√Hz (rows: DC, h1 Re, h1 Im, h3 Re, h3 Im),\n\
+                     scenario '{}', from {from} s, {steps_per_period} steps/period:\n\
+                     row_sigma_drive = [{}]\nrow_sigma_sense = [{}]\n",
+                    sc.name,
+                    f(d),
+                    f(s)
+                ),
+            )
         }
         Command::Demo {
             out: dir,

@@ -57,7 +57,11 @@ pub fn core_config(sc: &Scenario) -> Config {
     c.lockin_lpf_order = sc.sim.lockin_lpf_order;
     c.lockin_lpf_hz = sc.sim.lockin_lpf_hz;
     // rows are weighted to unit noise; a noise-free run keeps the 1 pm/√Hz weighting
-    c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 { sc.sim.noise_pm_rthz } else { 1.0 };
+    c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 {
+        sc.sim.noise_pm_rthz
+    } else {
+        1.0
+    };
     if sc.sim.noise_pm_rthz <= 0.0 {
         // noise-free data can legitimately repeat values
         c.monitor.stuck_samples = 0;
@@ -83,6 +87,8 @@ pub fn core_config(sc: &Scenario) -> Config {
     c.dither.pump_hz = sc.estimator.dither_pump_hz;
     c.dither.freq_hz = sc.estimator.dither_freq_hz;
     c.dither.start_s = sc.estimator.dither_start_s;
+    c.dither.scale_frac = sc.estimator.dither_scale_frac;
+    c.dither.scale_freq_hz = sc.estimator.dither_scale_freq_hz;
     c.dither.enabled = sc.estimator.dither_pump_hz > 0.0;
     c.rls.forgetting = sc.estimator.forgetting;
     c.monitor.gate_startup_s = sc.estimator.gate_startup_s;
@@ -106,7 +112,11 @@ fn omega_max(sc: &Scenario, cfg: &Config) -> f64 {
 }
 
 /// Runs a scenario (and its twin, if it has one); `progress` gets the fraction done.
-pub fn run(scenario: &Scenario, opts: &RunOptions, progress: &mut dyn FnMut(f64)) -> anyhow::Result<RunResult> {
+pub fn run(
+    scenario: &Scenario,
+    opts: &RunOptions,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<RunResult> {
     let wall = Instant::now();
     let twin_sc = scenario.twin_scenario();
     let share = if twin_sc.is_some() { 0.5 } else { 1.0 };
@@ -160,9 +170,15 @@ pub struct SimRun {
 }
 
 /// Runs one scenario (no twin) with the core in precision `T`.
-pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn FnMut(f64)) -> anyhow::Result<SimRun> {
+pub fn simulate<T: Real>(
+    sc: &Scenario,
+    opts: &RunOptions,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<SimRun> {
     let cfg = core_config(sc);
-    let mut est: Estimator<T> = cfg.build().map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let mut est: Estimator<T> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
     let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
     let fs = cfg.fs_hz;
@@ -186,10 +202,15 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
         .events
         .iter()
         .filter(|e| !e.kind.is_control())
-        .map(|e| Event { t_s: e.t_s, what: describe(&e.kind) })
+        .map(|e| Event {
+            t_s: e.t_s,
+            what: describe(&e.kind),
+        })
         .collect();
     let mut trace = Vec::with_capacity(n as usize + 1);
     let mut pump_hz = est.initial_pump_hz();
+    // the core's multiplier on the pump voltage scale (the amplitude part of the dither)
+    let mut scale_mult = 1.0;
     let mut last_progress = Instant::now();
     for k in 0..=n {
         let t = k as f64 / fs;
@@ -212,11 +233,14 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
                 EventKind::Retune { enabled } => est.set_retune(enabled),
                 _ => {}
             }
-            events.push(Event { t_s: e.t_s, what: describe(&e.kind) });
+            events.push(Event {
+                t_s: e.t_s,
+                what: describe(&e.kind),
+            });
             next_ctrl += 1;
         }
         let pa = sc.plant_at(t);
-        let s_k = sc.pump_scale_at(t);
+        let s_k = sc.pump_scale_at(t) * scale_mult;
         let li = sim.lockin();
         let c = |p: (f64, f64)| Cplx::new(T::from_f64(p.0), T::from_f64(p.1));
         let sample = Sample {
@@ -226,7 +250,10 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
                 y0_um: T::from_f64(li.y0),
                 y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
             },
-            accel_mps2: [T::from_f64(pa.accel_x * accel_si), T::from_f64(pa.accel_y * accel_si)],
+            accel_mps2: [
+                T::from_f64(pa.accel_x * accel_si),
+                T::from_f64(pa.accel_y * accel_si),
+            ],
             pump_hz,
             pump_scale: T::from_f64(s_k),
         };
@@ -254,7 +281,10 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
         });
         for (bit, what) in EVENT_NAMES {
             if out.events & bit != 0 {
-                events.push(Event { t_s: t, what: what.to_string() });
+                events.push(Event {
+                    t_s: t,
+                    what: what.to_string(),
+                });
             }
         }
         if k == n {
@@ -262,16 +292,25 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
         }
         // integrate the plant over [t_k, t_{k+1}]
         let pa1 = sc.plant_at(t_next);
-        let theta = Theta { drive: pa.theta_drive, sense: pa.theta_sense };
-        let u0 = PlantInputs { omega: pump_hz / (2.0 * f0), s: s_k, ax: pa.accel_x, ay: pa.accel_y };
+        let theta = Theta {
+            drive: pa.theta_drive,
+            sense: pa.theta_sense,
+        };
+        let u0 = PlantInputs {
+            omega: pump_hz / (2.0 * f0),
+            s: s_k,
+            ax: pa.accel_x,
+            ay: pa.accel_y,
+        };
         let u1 = PlantInputs {
             omega: out.pump_hz_next / (2.0 * f0),
-            s: sc.pump_scale_at(t_next),
+            s: sc.pump_scale_at(t_next) * out.pump_scale_next,
             ax: pa1.accel_x,
             ay: pa1.accel_y,
         };
         sim.advance(&theta, &u0, &u1);
         pump_hz = out.pump_hz_next;
+        scale_mult = out.pump_scale_next;
         if k % 50 == 0 && last_progress.elapsed().as_millis() >= 100 {
             progress(k as f64 / n as f64);
             last_progress = Instant::now();
@@ -288,32 +327,60 @@ pub fn simulate<T: Real>(sc: &Scenario, opts: &RunOptions, progress: &mut dyn Fn
 }
 
 const EVENT_NAMES: [(u8, &str); 7] = [
-    (paragyro_core::estimator::event::CHANGE_DRIVE, "change detected (drive): covariance reset"),
-    (paragyro_core::estimator::event::CHANGE_SENSE, "change detected (sense): covariance reset"),
-    (paragyro_core::estimator::event::RETUNE_START, "retune started"),
+    (
+        paragyro_core::estimator::event::CHANGE_DRIVE,
+        "change detected (drive): covariance reset",
+    ),
+    (
+        paragyro_core::estimator::event::CHANGE_SENSE,
+        "change detected (sense): covariance reset",
+    ),
+    (
+        paragyro_core::estimator::event::RETUNE_START,
+        "retune started",
+    ),
     (paragyro_core::estimator::event::RETUNE_DONE, "retune done"),
-    (paragyro_core::estimator::event::RETUNE_ABORT, "retune aborted: drive lock lost"),
-    (paragyro_core::estimator::event::BAD_INPUT, "bad input sample skipped"),
+    (
+        paragyro_core::estimator::event::RETUNE_ABORT,
+        "retune aborted: drive lock lost",
+    ),
+    (
+        paragyro_core::estimator::event::BAD_INPUT,
+        "bad input sample skipped",
+    ),
     (paragyro_core::estimator::event::SETTLED, "estimate settled"),
 ];
 
 fn describe(k: &EventKind) -> String {
     match k {
-        EventKind::Ramp { param, to, duration_s } => format!("ramp {} → {to} over {duration_s} s", param.name()),
+        EventKind::Ramp {
+            param,
+            to,
+            duration_s,
+        } => format!("ramp {} → {to} over {duration_s} s", param.name()),
         EventKind::ScaleTheta { factor } => format!("θ scaled ×{factor}"),
-        EventKind::PumpJump { centre_hz, to_sense_resonance } => match centre_hz {
+        EventKind::PumpJump {
+            centre_hz,
+            to_sense_resonance,
+        } => match centre_hz {
             Some(c) => format!("pump jump to {c:.1} Hz"),
             None if *to_sense_resonance => "pump jump to the sense resonance".into(),
             None => "pump jump".into(),
         },
         EventKind::Dither { .. } => k.to_string(),
-        EventKind::Retune { enabled } => format!("retune {}", if *enabled { "allowed" } else { "forbidden" }),
+        EventKind::Retune { enabled } => {
+            format!("retune {}", if *enabled { "allowed" } else { "forbidden" })
+        }
         EventKind::PumpScale { s, ramp_s } => format!("pump scale → {s} over {ramp_s} s"),
     }
 }
 
 fn rel(est: f64, tru: f64) -> f64 {
-    if tru != 0.0 { (est - tru).abs() / tru.abs() } else { (est - tru).abs() }
+    if tru != 0.0 {
+        (est - tru).abs() / tru.abs()
+    } else {
+        (est - tru).abs()
+    }
 }
 
 /// Time (s, from `t0`) after which |est − true|/|true| of θ component `j` stays below
@@ -327,7 +394,8 @@ pub fn settle_time(rows: &[TraceRow], j: usize, tol: f64, t0: f64) -> Option<f64
         }
     };
     let rows: Vec<&TraceRow> = rows.iter().filter(|r| r.t_s >= t0).collect();
-    let last_bad = rows.iter().rposition(|r| !(get(r) < tol));
+    // NaN counts as outside the tolerance
+    let last_bad = rows.iter().rposition(|r| get(r).is_nan() || get(r) >= tol);
     match last_bad {
         None => Some(0.0),
         Some(i) if i + 1 == rows.len() => None,
@@ -343,10 +411,20 @@ fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimR
     m.insert("seed".into(), json!(opts.seed.unwrap_or(sc.seed)));
     m.insert("sim_seconds".into(), json!(last.t_s));
     let obj = |d: &[f64], s: &[f64]| json!({"drive": d, "sense": s});
-    m.insert("theta_true".into(), obj(&last.theta_drive_true, &last.theta_sense_true));
-    m.insert("theta_est".into(), obj(&last.theta_drive_est, &last.theta_sense_est));
-    let rd: Vec<f64> = (0..8).map(|j| rel(last.theta_drive_est[j], last.theta_drive_true[j])).collect();
-    let rs: Vec<f64> = (0..6).map(|j| rel(last.theta_sense_est[j], last.theta_sense_true[j])).collect();
+    m.insert(
+        "theta_true".into(),
+        obj(&last.theta_drive_true, &last.theta_sense_true),
+    );
+    m.insert(
+        "theta_est".into(),
+        obj(&last.theta_drive_est, &last.theta_sense_est),
+    );
+    let rd: Vec<f64> = (0..8)
+        .map(|j| rel(last.theta_drive_est[j], last.theta_drive_true[j]))
+        .collect();
+    let rs: Vec<f64> = (0..6)
+        .map(|j| rel(last.theta_sense_est[j], last.theta_sense_true[j]))
+        .collect();
     m.insert("theta_rel_err".into(), obj(&rd, &rs));
     let phys = |v: &[f64; 12]| {
         let mut o = Map::new();
@@ -359,17 +437,27 @@ fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimR
     m.insert("physical_est".into(), phys(&last.phys_est));
     m.insert("rate_dps_true".into(), json!(last.rate_dps_true));
     m.insert("rate_dps_est".into(), json!(last.rate_dps_est));
-    m.insert("rate_rel_err".into(), json!(rel(last.rate_dps_est, last.rate_dps_true)));
+    m.insert(
+        "rate_rel_err".into(),
+        json!(rel(last.rate_dps_est, last.rate_dps_true)),
+    );
     m.insert("wy2_true_final".into(), json!(last.phys_true[4]));
     m.insert("wy2_est_final".into(), json!(last.phys_est[4]));
-    m.insert("pump_centre_final_hz".into(), json!(main.pump_centre_final_hz));
+    m.insert(
+        "pump_centre_final_hz".into(),
+        json!(main.pump_centre_final_hz),
+    );
     // convergence after the dither starts
     let t0 = main.dither_start_s;
     let mut conv = Map::new();
     for (tol, key) in [(0.1, "within_10pct_s"), (0.01, "within_1pct_s")] {
         let mut o = Map::new();
         for j in 0..14 {
-            let name = if j < 8 { THETA_DRIVE_NAMES[j] } else { THETA_SENSE_NAMES[j - 8] };
+            let name = if j < 8 {
+                THETA_DRIVE_NAMES[j]
+            } else {
+                THETA_SENSE_NAMES[j - 8]
+            };
             o.insert(name.into(), json!(settle_time(&main.trace, j, tol, t0)));
         }
         conv.insert(key.into(), Value::Object(o));
@@ -396,14 +484,21 @@ fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimR
     if let (Some(a), Some(b)) = (get("sense_amp_detuned"), get("sense_amp_tuned")) {
         m.insert("sense_amp_ratio".into(), json!(a / b));
     }
-    if let (Some(before), Some(after)) = (get("sense_amp_before_drift"), get("sense_amp_after_drift")) {
+    if let (Some(before), Some(after)) =
+        (get("sense_amp_before_drift"), get("sense_amp_after_drift"))
+    {
         m.insert("sense_amp_after_drift_ratio".into(), json!(after / before));
     }
-    if let (Some(before), Some(after)) = (get("sense_amp_before_drift"), get("sense_amp_after_retune")) {
+    if let (Some(before), Some(after)) =
+        (get("sense_amp_before_drift"), get("sense_amp_after_retune"))
+    {
         m.insert("sense_amp_after_retune_ratio".into(), json!(after / before));
     }
     if let Some(t) = twin {
-        m.insert("twin_pump_centre_final_hz".into(), json!(t.pump_centre_final_hz));
+        m.insert(
+            "twin_pump_centre_final_hz".into(),
+            json!(t.pump_centre_final_hz),
+        );
     }
     Value::Object(m)
 }
@@ -414,7 +509,9 @@ fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimR
 /// `y − Φ·(θ_true − θ_nom)` on every sample from `from_s` on.
 pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [f64; 5])> {
     let cfg = core_config(sc);
-    let mut est: Estimator<f64> = cfg.build().map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let mut est: Estimator<f64> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
     let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
     let fs = cfg.fs_hz;
@@ -433,6 +530,7 @@ pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [
     let n = (sc.duration_s * fs).round() as u64;
     let accel_si = L0_M * w0 * w0;
     let mut pump_hz = est.initial_pump_hz();
+    let mut scale_mult = 1.0;
     let (mut s1, mut s2) = ([0.0f64; 5], [0.0f64; 5]);
     let mut count = 0usize;
     for k in 0..=n {
@@ -441,10 +539,15 @@ pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [
         let li = sim.lockin();
         let c = |p: (f64, f64)| Cplx::new(p.0, p.1);
         let sample = Sample {
-            lockin: Lockin { x0_um: li.x0, x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])], y0_um: li.y0, y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])] },
+            lockin: Lockin {
+                x0_um: li.x0,
+                x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])],
+                y0_um: li.y0,
+                y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
+            },
             accel_mps2: [pa.accel_x * accel_si, pa.accel_y * accel_si],
             pump_hz,
-            pump_scale: sc.pump_scale_at(t),
+            pump_scale: sc.pump_scale_at(t) * scale_mult,
         };
         let (n1, n2) = est.nominal_theta();
         let out = est.step(&sample);
@@ -469,14 +572,32 @@ pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [
         }
         let t_next = (k + 1) as f64 / fs;
         let pa1 = sc.plant_at(t_next);
-        let theta = Theta { drive: pa.theta_drive, sense: pa.theta_sense };
-        let u0 = PlantInputs { omega: pump_hz / (2.0 * f0), s: sc.pump_scale_at(t), ax: pa.accel_x, ay: pa.accel_y };
-        let u1 = PlantInputs { omega: out.pump_hz_next / (2.0 * f0), s: sc.pump_scale_at(t_next), ax: pa1.accel_x, ay: pa1.accel_y };
+        let theta = Theta {
+            drive: pa.theta_drive,
+            sense: pa.theta_sense,
+        };
+        let u0 = PlantInputs {
+            omega: pump_hz / (2.0 * f0),
+            s: sc.pump_scale_at(t) * scale_mult,
+            ax: pa.accel_x,
+            ay: pa.accel_y,
+        };
+        let u1 = PlantInputs {
+            omega: out.pump_hz_next / (2.0 * f0),
+            s: sc.pump_scale_at(t_next) * out.pump_scale_next,
+            ax: pa1.accel_x,
+            ay: pa1.accel_y,
+        };
         sim.advance(&theta, &u0, &u1);
         pump_hz = out.pump_hz_next;
+        scale_mult = out.pump_scale_next;
     }
     anyhow::ensure!(count > 10, "calibration window too short");
-    let noise = if sc.sim.noise_pm_rthz > 0.0 { sc.sim.noise_pm_rthz } else { 1.0 };
+    let noise = if sc.sim.noise_pm_rthz > 0.0 {
+        sc.sim.noise_pm_rthz
+    } else {
+        1.0
+    };
     let f = |s: [f64; 5]| s.map(|v| (v / count as f64).sqrt() / noise);
     Ok((f(s1), f(s2)))
 }

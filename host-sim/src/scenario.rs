@@ -400,6 +400,11 @@ pub struct EstimatorSpec {
     pub dither_pump_hz: f64,
     /// Dither frequency, Hz.
     pub dither_freq_hz: f64,
+    /// Peak fractional modulation of the pump voltage scale s that runs with the dither
+    /// (0 disables).
+    pub dither_scale_frac: f64,
+    /// Frequency of the pump-scale modulation, Hz.
+    pub dither_scale_freq_hz: f64,
     /// Dither start, s.
     pub dither_start_s: f64,
     /// RLS updates gated off for this long after start-up, s.
@@ -418,7 +423,9 @@ impl Default for EstimatorSpec {
             forgetting: 0.999,
             pump_centre_hz: None,
             dither_pump_hz: 21.6,
-            dither_freq_hz: 2.0,
+            dither_freq_hz: 5.0,
+            dither_scale_frac: 0.1,
+            dither_scale_freq_hz: 1.3,
             dither_start_s: 1.0,
             gate_startup_s: 0.5,
             retune: true,
@@ -1682,6 +1689,20 @@ impl Scenario {
         }
         non_negative(est.dither_pump_hz, path(&["estimator", "dither_pump_hz"]))?;
         positive(est.dither_freq_hz, path(&["estimator", "dither_freq_hz"]))?;
+        non_negative(
+            est.dither_scale_frac,
+            path(&["estimator", "dither_scale_frac"]),
+        )?;
+        if est.dither_scale_frac > 0.3 {
+            return Err(problem(
+                path(&["estimator", "dither_scale_frac"]),
+                "must be at most 0.3",
+            ));
+        }
+        positive(
+            est.dither_scale_freq_hz,
+            path(&["estimator", "dither_scale_freq_hz"]),
+        )?;
         non_negative(est.dither_start_s, path(&["estimator", "dither_start_s"]))?;
         non_negative(est.gate_startup_s, path(&["estimator", "gate_startup_s"]))?;
         non_negative(est.retune_ramp_s, path(&["estimator", "retune_ramp_s"]))?;

@@ -55,7 +55,7 @@ pub fn all_within_from(trace: &[TraceRow], tol: f64, t0: f64, t_end: f64) -> Opt
         .collect();
     let bad = rows
         .iter()
-        .rposition(|r| (0..14).any(|j| !(theta_err(r, j) < tol)));
+        .rposition(|r| (0..14).any(|j| theta_err(r, j).is_nan() || theta_err(r, j) >= tol));
     match bad {
         None => Some(t0),
         Some(i) if i + 1 == rows.len() => None,
