@@ -277,6 +277,7 @@ pub struct Estimator<T: Real> {
     health: Health,
     counters: Counters,
     last_drive_amp: f64,
+    /// Mean pump voltage scale (EWMA over ~1 s).
     last_s: f64,
     last_relin: u64,
     relins: u32,
@@ -795,7 +796,10 @@ impl<T: Real> Estimator<T> {
             && self.rls2.min_d() > T::ZERO;
         let drive_amp = env.a[0].abs().to_f64();
         self.last_drive_amp = drive_amp;
-        self.last_s = pscale.to_f64();
+        // mean pump scale (1 s EWMA): the amplitude dither must not make the band guard
+        // wobble with the instantaneous s
+        let a = 1.0 / self.cfg.fs_hz;
+        self.last_s += a * (pscale.to_f64() - self.last_s);
         let mut health = Health {
             inputs_valid: good,
             excitation_ok,
