@@ -81,13 +81,20 @@ mod fw {
             let out = est.step(&s);
             let t1 = SYST::get_current();
             total += ((t0.wrapping_sub(t1)) & 0x00FF_FFFF) as u64;
-            // vary the sample a little so no channel is stuck
-            let d = (i % 7) as f32 * 1e-5;
-            s.lockin.x_um[0].re = sample.lockin.x_um[0].re + d;
-            s.lockin.y_um[0].im = sample.lockin.y_um[0].im - d;
-            s.lockin.x0_um = sample.lockin.x0_um + d * 0.1;
-            s.lockin.y0_um = sample.lockin.y0_um + d * 0.1;
+            // every channel moves a little, as real data with noise does (a constant
+            // channel would rightly be flagged as a stuck ADC)
+            let d = |j: u32| (((i + 3 * j) * 7919) % 13) as f32 * 1e-5;
+            s.lockin.x0_um = sample.lockin.x0_um + d(0);
+            s.lockin.y0_um = sample.lockin.y0_um + d(1);
+            for h in 0..3 {
+                let j = 2 + 4 * h as u32;
+                s.lockin.x_um[h].re = sample.lockin.x_um[h].re + d(j);
+                s.lockin.x_um[h].im = sample.lockin.x_um[h].im + d(j + 1);
+                s.lockin.y_um[h].re = sample.lockin.y_um[h].re + d(j + 2);
+                s.lockin.y_um[h].im = sample.lockin.y_um[h].im + d(j + 3);
+            }
             s.pump_hz = out.pump_hz_next;
+            s.pump_scale = out.pump_scale_next as f32;
             if !(out.pump_hz_next.is_finite() && out.pump_hz_next > 0.0) || !out.health.inputs_valid
             {
                 ok = false;
