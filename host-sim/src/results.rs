@@ -65,7 +65,7 @@ fn line(name: &str, r: &RunResult) -> String {
             let g = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
             let _ = write!(
                 out,
-                "ω̂y² error {:.1e} at 3.0 s, final ω̂y² {:.6}; sense |B1| {:.3} µm before the drift, {:.3} µm ({:.0} %) without retune, {:.3} µm ({:.0} %) after the retune",
+                "ω̂y² error {:.1e} at 3.0 s, final ω̂y² {:.6}; sense amplitude {:.3} µm before the drift, {:.3} µm ({:.0} %) without retune, {:.3} µm ({:.0} %) after the retune",
                 at3.unwrap_or(f64::NAN),
                 g("wy2_est_final"),
                 g("sense_amp_before_drift"),
@@ -91,7 +91,7 @@ fn line(name: &str, r: &RunResult) -> String {
             let g = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
             let _ = write!(
                 out,
-                "sense |B1| {:.3} µm at ωy² = 1.0265, {:.3} µm at 1.03 with the same pump: ratio {:.3} (paper: 0.20)",
+                "sense amplitude {:.3} µm at ωy² = 1.0265, {:.3} µm at 1.03 with the same pump: ratio {:.3} (paper: 0.20)",
                 g("sense_amp_tuned"),
                 g("sense_amp_detuned"),
                 g("sense_amp_ratio")
