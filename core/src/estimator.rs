@@ -250,6 +250,14 @@ pub struct Estimator<T: Real> {
     gate_jump: u64,
     gate_bad: u64,
     dither_rms: f64,
+    /// (excitation_min_fraction · dither rms)², compared with the meter's variance.
+    exc_var_min: T,
+    /// EWMA weight of the mean pump scale (1 s).
+    s_alpha: T,
+    /// Reference pump frequency 2·f0·ω_ref, Hz (f64), 1/(2 f0) and 2ω_ref in T.
+    pump_ref_hz: f64,
+    inv_2f0: T,
+    two_om_ref: T,
     // blocks
     rep: Option<Replicas<T>>,
     rep_co: ReplicaCoeffs<T>,
@@ -258,10 +266,14 @@ pub struct Estimator<T: Real> {
     last_known: Known<T>,
     rls1: Rls<T, 8>,
     rls2: Rls<T, 6>,
-    det1: ChangeDetector,
-    det2: ChangeDetector,
+    det1: ChangeDetector<T>,
+    det2: ChangeDetector<T>,
     stuck: StuckDetector<T>,
-    exc: ExcitationMeter,
+    exc: ExcitationMeter<T>,
+    // nominal θ14, θ22, θ24 in T (for ω̂y² on the tick path)
+    th14n: T,
+    th22n: T,
+    th24n: T,
     settle: SettleTest,
     sched: Scheduler<T>,
     sup: Supervisor,
@@ -278,7 +290,7 @@ pub struct Estimator<T: Real> {
     counters: Counters,
     last_drive_amp: f64,
     /// Mean pump voltage scale (EWMA over ~1 s).
-    last_s: f64,
+    last_s: T,
     last_relin: u64,
     relins: u32,
 }
@@ -353,6 +365,14 @@ impl<T: Real> Estimator<T> {
             gate_jump: samples(m.gate_jump_s),
             gate_bad: samples(m.bad_input_gate_s),
             dither_rms: dither_amp / core::f64::consts::SQRT_2,
+            exc_var_min: {
+                let v = m.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
+                T::from_f64(v * v)
+            },
+            s_alpha: T::from_f64(1.0 / cfg.fs_hz),
+            pump_ref_hz: 2.0 * cfg.f0_hz * om_ref,
+            inv_2f0: T::from_f64(1.0 / (2.0 * cfg.f0_hz)),
+            two_om_ref: T::from_f64(2.0 * om_ref),
             rep: None,
             rep_co,
             rows: RowBuilder::new(w_svf, ts, nom),
@@ -364,6 +384,9 @@ impl<T: Real> Estimator<T> {
             det2: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
             stuck: StuckDetector::new(m.stuck_samples),
             exc: ExcitationMeter::new(1.0 / (0.5 * cfg.fs_hz)),
+            th14n: T::from_f64(th1n[3]),
+            th22n: T::from_f64(th2n[1]),
+            th24n: T::from_f64(th2n[3]),
             settle: SettleTest::new(every, need, t.settle_tol),
             sched: Scheduler::new(
                 om_ref,
@@ -386,7 +409,7 @@ impl<T: Real> Estimator<T> {
             health: Health::default(),
             counters: Counters::default(),
             last_drive_amp: 0.0,
-            last_s: 1.0,
+            last_s: T::ONE,
             last_relin: 0,
             relins: 0,
         }
@@ -403,7 +426,7 @@ impl<T: Real> Estimator<T> {
     }
 
     fn pump_hz_of(&self, dev: f64) -> f64 {
-        2.0 * self.f0_hz * (self.om_ref + dev)
+        self.pump_ref_hz + 2.0 * self.f0_hz * dev
     }
 
     /// Current pump centre (without dither), Hz.
@@ -450,6 +473,8 @@ impl<T: Real> Estimator<T> {
             let amp = pump_hz / (2.0 * self.f0_hz);
             self.sched.set_dither_amp(amp);
             self.dither_rms = amp / core::f64::consts::SQRT_2;
+            let v = self.cfg.monitor.excitation_min_fraction * self.dither_rms;
+            self.exc_var_min = T::from_f64(v * v);
         }
     }
 
@@ -492,6 +517,9 @@ impl<T: Real> Estimator<T> {
         self.rows.relinearize(&t1, &t2, self.om_ref);
         self.th1n = t1;
         self.th2n = t2;
+        self.th14n = T::from_f64(t1[3]);
+        self.th22n = T::from_f64(t2[1]);
+        self.th24n = T::from_f64(t2[3]);
         self.rls1.set_estimate([T::ZERO; 8]);
         self.rls2.set_estimate([T::ZERO; 6]);
         self.relins += 1;
@@ -565,6 +593,18 @@ impl<T: Real> Estimator<T> {
         rate_dps_from_gamma(self.physical().gamma, self.cfg.omega0_rad_s())
     }
 
+    /// ω̂y² in `T` from the three θ components it needs (the tick path; `wy2()` is the
+    /// `f64` value from the full θ̂).
+    fn wy2_fast(&self) -> T {
+        let x1 = self.rls1.estimate();
+        let x2 = self.rls2.estimate();
+        let t14 = self.th14n + self.sc1[3] * x1[3];
+        let t22 = self.th22n + self.sc2[1] * x2[1];
+        let t24 = self.th24n + self.sc2[3] * x2[3];
+        let g = (t14 - t24) * T::from_f64(0.25);
+        -t22 + g * g
+    }
+
     /// Estimated ω_y² (non-dimensional).
     pub fn wy2(&self) -> f64 {
         let (t1, t2) = self.theta();
@@ -631,6 +671,7 @@ impl<T: Real> Estimator<T> {
     }
 
     /// Processes one 500 Hz sample. Never fails, never panics, never allocates.
+    #[inline(never)]
     pub fn step(&mut self, s: &Sample<T>) -> StepOutput {
         let k = self.k;
         let mut events = 0u8;
@@ -678,9 +719,11 @@ impl<T: Real> Estimator<T> {
         };
 
         // ---- known signals through the replica of the lock-in low-pass
-        let dev = pump_hz / (2.0 * self.f0_hz) - self.om_ref;
-        let dom = T::from_f64(dev);
-        let dom2 = T::from_f64(dev * (2.0 * self.om_ref + dev));
+        // ω − ω_ref from the small Hz offset: one f64 subtraction, the rest in T keeps
+        // ~1e-10 absolute precision (the offset is at most a few % of the pump)
+        let dev = T::from_f64(pump_hz - self.pump_ref_hz) * self.inv_2f0;
+        let dom = dev;
+        let dom2 = dev * (self.two_om_ref + dev);
         let ds = pscale - T::ONE;
         let co = self.rep_co;
         let rep = self.rep.get_or_insert_with(|| Replicas {
@@ -700,12 +743,12 @@ impl<T: Real> Estimator<T> {
             ax: rep.ax.update(&rep.co, acc[0]),
             ay: rep.ay.update(&rep.co, acc[1]),
         };
-        let exc_rms = self.exc.push(f_dom.to_f64());
+        let exc_var = self.exc.push(f_dom);
         self.last_known = known;
 
         // ---- rows
-        let rows = self.rows.push(&env, &known);
-        self.last_rows = rows;
+        self.rows.push(&env, &known, &mut self.last_rows);
+        let rows = &self.last_rows;
 
         // ---- gating and RLS
         let gated = k < self.gate_startup || k < self.jump_gate_until || k < self.bad_gate_until;
@@ -715,8 +758,8 @@ impl<T: Real> Estimator<T> {
             self.counters.updates += 1;
             self.rls1.begin_sample();
             self.rls2.begin_sample();
-            let mut sum1 = 0.0;
-            let mut sum2 = 0.0;
+            let mut sum1 = T::ZERO;
+            let mut sum2 = T::ZERO;
             for r in 0..NROWS {
                 let w = self.w1[r];
                 let mut phi = [T::ZERO; 8];
@@ -724,14 +767,14 @@ impl<T: Real> Estimator<T> {
                     phi[j] = rows.drive_phi[r][j] * self.sc1[j] * w;
                 }
                 let inn = self.rls1.update(&phi, rows.drive_y[r] * w);
-                sum1 += inn.normalized_sq().to_f64();
+                sum1 += inn.normalized_sq();
                 let w = self.w2[r];
                 let mut phi = [T::ZERO; 6];
                 for j in 0..6 {
                     phi[j] = rows.sense_phi[r][j] * self.sc2[j] * w;
                 }
                 let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
-                sum2 += inn.normalized_sq().to_f64();
+                sum2 += inn.normalized_sq();
             }
             let p = T::from_f64(self.cfg.rls.p_reset);
             if self.det1.push(k, sum1) {
@@ -753,9 +796,9 @@ impl<T: Real> Estimator<T> {
         }
 
         // ---- settle, excitation, health
-        let wy2 = self.wy2();
+        let wy2 = self.wy2_fast();
         if updated {
-            self.settle.push(k, wy2);
+            self.settle.push(k, wy2.to_f64());
         }
         let window = (self.cfg.retune.settle_window_s * self.cfg.fs_hz) as u64;
         let settled = !gated && self.settle.settled() && k >= self.last_reset + window;
@@ -783,9 +826,8 @@ impl<T: Real> Estimator<T> {
             self.relinearize();
             self.last_relin = k;
         }
-        let excitation_ok = self.dither_rms > 0.0
-            && exc_rms >= self.cfg.monitor.excitation_min_fraction * self.dither_rms;
-        let (tr1, tr2) = (self.rls1.trace(), self.rls2.trace());
+        let excitation_ok = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
+        let (tr1, tr2) = (self.rls1.last_trace(), self.rls2.last_trace());
         let lim1 = T::from_f64(self.cfg.rls.p0 * 8.0 * 1.0001);
         let lim2 = T::from_f64(self.cfg.rls.p0 * 6.0 * 1.0001);
         let covariance_bounded = tr1.is_finite()
@@ -798,8 +840,7 @@ impl<T: Real> Estimator<T> {
         self.last_drive_amp = drive_amp;
         // mean pump scale (1 s EWMA): the amplitude dither must not make the band guard
         // wobble with the instantaneous s
-        let a = 1.0 / self.cfg.fs_hz;
-        self.last_s += a * (pscale.to_f64() - self.last_s);
+        self.last_s += self.s_alpha * (pscale - self.last_s);
         let mut health = Health {
             inputs_valid: good,
             excitation_ok,
@@ -813,9 +854,14 @@ impl<T: Real> Estimator<T> {
 
         // ---- retune supervisor
         let centre_om = self.om_ref + self.sched.centre();
-        let healthy = health.actionable() && k >= self.bad_gate_until;
-        let band = if healthy {
-            drive_band(&self.theta().0, self.last_s)
+        // retune decisions at 20 Hz (every 25 samples): plenty for a move of ≥ 0.5 s,
+        // and the f64 work stays off most ticks; lock tracking and ramps run every tick
+        let decide = k.is_multiple_of(25);
+        let healthy = decide && health.actionable() && k >= self.bad_gate_until;
+        let wy2 = if decide { wy2.to_f64() } else { 0.0 };
+        // the band (three f64 square roots) only when a retune is actually in view
+        let band = if self.sup.would_retune(k, healthy, wy2, centre_om) {
+            drive_band(&self.theta().0, self.last_s.to_f64())
         } else {
             None
         };

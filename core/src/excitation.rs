@@ -54,17 +54,33 @@ pub struct Scheduler<T> {
     centre: f64,
     ramp: Option<Ramp>,
     dither_amp: T,
-    dither_step: T,
-    dither_phase: T,
+    /// Unit phasor of the frequency dither (cos, sin) and its per-sample rotation.
+    dither_z: (T, T),
+    dither_rot: (T, T),
     dither_on: bool,
     /// Dither envelope 0..1 (raised-cosine taper).
-    env: f64,
-    env_step: f64,
+    env: T,
+    env_step: T,
     dither_start_k: u64,
-    scale_amp: f64,
-    scale_step: f64,
-    scale_phase: f64,
-    scale_cmd: f64,
+    scale_amp: T,
+    scale_z: (T, T),
+    scale_rot: (T, T),
+    scale_cmd: T,
+}
+
+/// (cos, sin) of `a` (design time, f64).
+fn rot<T: Real>(a: f64) -> (T, T) {
+    (T::from_f64(libm::cos(a)), T::from_f64(libm::sin(a)))
+}
+
+/// Rotates the unit phasor `z` by `r` and renormalises it to first order (a sine
+/// generator without transcendentals on the tick path: libm's `sinf` works in `f64`,
+/// which is soft-float on a Cortex-M4F).
+#[inline]
+fn advance<T: Real>(z: (T, T), r: (T, T)) -> (T, T) {
+    let (c, s) = (z.0 * r.0 - z.1 * r.1, z.0 * r.1 + z.1 * r.0);
+    let g = (T::from_f64(3.0) - (c * c + s * s)) * T::from_f64(0.5);
+    (c * g, s * g)
 }
 
 impl<T: Real> Scheduler<T> {
@@ -83,34 +99,34 @@ impl<T: Real> Scheduler<T> {
             centre: 0.0,
             ramp: None,
             dither_amp: T::from_f64(dither_amp),
-            dither_step: T::from_f64(2.0 * core::f64::consts::PI * dither_cycles_per_sample),
-            dither_phase: T::ZERO,
+            dither_z: (T::ONE, T::ZERO),
+            dither_rot: rot(2.0 * core::f64::consts::PI * dither_cycles_per_sample),
             dither_on: enabled,
-            env: 0.0,
-            env_step: if taper_samples >= 1.0 {
+            env: T::ZERO,
+            env_step: T::from_f64(if taper_samples >= 1.0 {
                 1.0 / taper_samples
             } else {
                 1.0
-            },
+            }),
             dither_start_k: start_k,
-            scale_amp: 0.0,
-            scale_step: 0.0,
-            scale_phase: 0.0,
-            scale_cmd: 1.0,
+            scale_amp: T::ZERO,
+            scale_z: (T::ONE, T::ZERO),
+            scale_rot: (T::ONE, T::ZERO),
+            scale_cmd: T::ONE,
         }
     }
 
     /// Adds a sinusoidal modulation of the pump voltage scale s (peak fraction `frac`,
     /// `cycles_per_sample`), switched and tapered together with the frequency dither.
     pub fn with_scale_dither(mut self, frac: f64, cycles_per_sample: f64) -> Self {
-        self.scale_amp = frac;
-        self.scale_step = 2.0 * core::f64::consts::PI * cycles_per_sample;
+        self.scale_amp = T::from_f64(frac);
+        self.scale_rot = rot(2.0 * core::f64::consts::PI * cycles_per_sample);
         self
     }
 
     /// Multiplier of the pump voltage scale s at the last commanded sample (1 = none).
     pub fn scale_command(&self) -> f64 {
-        self.scale_cmd
+        self.scale_cmd.to_f64()
     }
 
     /// Centre deviation (from ω_ref) at the last computed sample.
@@ -158,7 +174,7 @@ impl<T: Real> Scheduler<T> {
 
     /// Dither envelope (0 off … 1 full).
     pub fn dither_envelope(&self) -> f64 {
-        self.env
+        self.env.to_f64()
     }
 
     /// Computes the commanded ω deviation (from ω_ref) for sample `k`, advancing the
@@ -172,28 +188,29 @@ impl<T: Real> Scheduler<T> {
         }
         let want = self.dither_on && k >= self.dither_start_k;
         if want {
-            self.env = (self.env + self.env_step).min(1.0);
+            self.env = (self.env + self.env_step).min(T::ONE);
         } else {
-            self.env = (self.env - self.env_step).max(0.0);
+            self.env = (self.env - self.env_step).max(T::ZERO);
         }
-        let shape = 0.5 - 0.5 * libm::cos(core::f64::consts::PI * self.env);
-        let mut d = 0.0;
-        self.scale_cmd = 1.0;
-        if self.env > 0.0 {
-            d = (self.dither_amp.to_f64()) * shape * libm::sin(self.dither_phase.to_f64());
-            self.dither_phase += self.dither_step;
-            if self.dither_phase.to_f64() > 2.0 * core::f64::consts::PI {
-                self.dither_phase -= T::from_f64(2.0 * core::f64::consts::PI);
-            }
-            self.scale_cmd = 1.0 + self.scale_amp * shape * libm::sin(self.scale_phase);
-            self.scale_phase += self.scale_step;
-            if self.scale_phase > 2.0 * core::f64::consts::PI {
-                self.scale_phase -= 2.0 * core::f64::consts::PI;
-            }
+        let half = T::from_f64(0.5);
+        let mut d = T::ZERO;
+        self.scale_cmd = T::ONE;
+        if self.env > T::ZERO {
+            // raised-cosine taper, only while tapering
+            let shape = if self.env < T::ONE {
+                half - half * (T::from_f64(core::f64::consts::PI) * self.env).cos()
+            } else {
+                T::ONE
+            };
+            d = self.dither_amp * shape * self.dither_z.1;
+            self.dither_z = advance(self.dither_z, self.dither_rot);
+            self.scale_cmd = T::ONE + self.scale_amp * shape * self.scale_z.1;
+            self.scale_z = advance(self.scale_z, self.scale_rot);
         } else {
-            self.dither_phase = T::ZERO;
-            self.scale_phase = 0.0;
+            self.dither_z = (T::ONE, T::ZERO);
+            self.scale_z = (T::ONE, T::ZERO);
         }
+        let d = d.to_f64();
         self.centre + d
     }
 }

@@ -83,6 +83,7 @@ pub struct AxisProj<T> {
 
 /// Projections of `X³`, `X³cos2ψ` (when `with_pump`) and `X cos2ψ` for the series
 /// `X0 + Σ Re(A_k e^{ikψ})`.
+#[inline(never)]
 pub fn project<T: Real>(
     tb: &SynthTables<T>,
     x0: T,

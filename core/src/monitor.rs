@@ -77,38 +77,38 @@ impl<T: Real> StuckDetector<T> {
 
 /// The innovation change detector of one axis.
 #[derive(Clone, Copy, Debug)]
-pub struct ChangeDetector {
-    level: f64,
-    nominal: f64,
-    alpha: f64,
-    threshold: f64,
+pub struct ChangeDetector<T> {
+    level: T,
+    nominal: T,
+    alpha: T,
+    threshold: T,
     hold: u64,
     last_alarm: Option<u64>,
 }
 
-impl ChangeDetector {
+impl<T: Real> ChangeDetector<T> {
     /// `nominal` level (number of rows), EWMA weight, threshold, hold (samples).
     pub fn new(nominal: f64, alpha: f64, threshold: f64, hold: u64) -> Self {
         ChangeDetector {
-            level: nominal,
-            nominal,
-            alpha,
-            threshold,
+            level: T::from_f64(nominal),
+            nominal: T::from_f64(nominal),
+            alpha: T::from_f64(alpha),
+            threshold: T::from_f64(threshold),
             hold,
             last_alarm: None,
         }
     }
     /// Current EWMA level.
     pub fn level(&self) -> f64 {
-        self.level
+        self.level.to_f64()
     }
     /// Feeds the sum of one sample's normalised squared innovations; true on alarm
     /// (the level then restarts at nominal).
-    pub fn push(&mut self, k: u64, sum_norm_sq: f64) -> bool {
+    pub fn push(&mut self, k: u64, sum_norm_sq: T) -> bool {
         if !sum_norm_sq.is_finite() {
             return false;
         }
-        self.level = (1.0 - self.alpha) * self.level + self.alpha * sum_norm_sq;
+        self.level += self.alpha * (sum_norm_sq - self.level);
         let free = match self.last_alarm {
             None => true,
             Some(a) => k >= a + self.hold,
@@ -132,31 +132,31 @@ impl ChangeDetector {
 
 /// rms of a signal about its running mean (EWMA with weight `alpha`).
 #[derive(Clone, Copy, Debug)]
-pub struct ExcitationMeter {
-    mean: f64,
-    var: f64,
-    alpha: f64,
+pub struct ExcitationMeter<T> {
+    mean: T,
+    var: T,
+    alpha: T,
 }
 
-impl ExcitationMeter {
+impl<T: Real> ExcitationMeter<T> {
     /// EWMA weight per sample.
     pub fn new(alpha: f64) -> Self {
         ExcitationMeter {
-            mean: 0.0,
-            var: 0.0,
-            alpha,
+            mean: T::ZERO,
+            var: T::ZERO,
+            alpha: T::from_f64(alpha),
         }
     }
-    /// Feeds one value; returns the current rms.
-    pub fn push(&mut self, v: f64) -> f64 {
+    /// Feeds one value; returns the current variance.
+    pub fn push(&mut self, v: T) -> T {
         self.mean += self.alpha * (v - self.mean);
         let d = v - self.mean;
         self.var += self.alpha * (d * d - self.var);
-        self.rms()
+        self.var
     }
     /// Current rms.
     pub fn rms(&self) -> f64 {
-        libm::sqrt(self.var.max(0.0))
+        libm::sqrt(self.var.to_f64().max(0.0))
     }
 }
 
@@ -172,6 +172,8 @@ pub struct SettleTest {
     every: u64,
     need: usize,
     tol: f64,
+    /// The verdict, recomputed when a value is pushed (the tick only reads it).
+    verdict: bool,
 }
 
 impl SettleTest {
@@ -185,12 +187,14 @@ impl SettleTest {
             every: every.max(1),
             need: need.clamp(2, SETTLE_RING),
             tol,
+            verdict: false,
         }
     }
     /// Forgets the history.
     pub fn clear(&mut self) {
         self.len = 0;
         self.pos = 0;
+        self.verdict = false;
     }
     /// Feeds the value at sample `k`.
     pub fn push(&mut self, k: u64, v: f64) {
@@ -204,9 +208,13 @@ impl SettleTest {
         self.ring[self.pos] = v;
         self.pos = (self.pos + 1) % SETTLE_RING;
         self.len = (self.len + 1).min(SETTLE_RING);
+        self.verdict = self.evaluate();
     }
     /// Settled now.
     pub fn settled(&self) -> bool {
+        self.verdict
+    }
+    fn evaluate(&self) -> bool {
         if self.len < self.need {
             return false;
         }
@@ -247,7 +255,7 @@ mod tests {
     #[test]
     fn change_detector_quiet_on_noise_fires_on_step() {
         let mut s = 7u64;
-        let mut d = ChangeDetector::new(5.0, 0.05, 1e3, 25);
+        let mut d = ChangeDetector::<f64>::new(5.0, 0.05, 1e3, 25);
         for k in 0..100_000u64 {
             assert!(!d.push(k, noise_sum(&mut s)), "false alarm at {k}");
         }
@@ -301,11 +309,11 @@ mod tests {
             st.push(k, 1.03 + 1e-7 * (k as f64 * 0.1).sin());
         }
         assert!(st.settled());
-        let mut m = ExcitationMeter::new(0.004);
-        let mut r = 0.0;
+        let mut m = ExcitationMeter::<f64>::new(0.004);
         for k in 0..5000 {
-            r = m.push(1e-3 * (2.0 * core::f64::consts::PI * 2.0 * k as f64 / 500.0).sin());
+            m.push(1e-3 * (2.0 * core::f64::consts::PI * 2.0 * k as f64 / 500.0).sin());
         }
+        let r = m.rms();
         assert!((r - 1e-3 / 2f64.sqrt()).abs() < 1e-4, "rms {r}");
     }
 }

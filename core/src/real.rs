@@ -43,6 +43,10 @@ pub trait Real:
     fn abs(self) -> Self;
     /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
+    /// Sine (libm).
+    fn sin(self) -> Self;
+    /// Cosine (libm).
+    fn cos(self) -> Self;
     /// The larger of two values (NaN-free inputs).
     #[inline]
     fn max(self, o: Self) -> Self {
@@ -80,6 +84,14 @@ impl Real for f32 {
     fn is_finite(self) -> bool {
         f32::is_finite(self)
     }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sinf(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cosf(self)
+    }
 }
 
 impl Real for f64 {
@@ -106,5 +118,13 @@ impl Real for f64 {
     #[inline]
     fn is_finite(self) -> bool {
         f64::is_finite(self)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cos(self)
     }
 }

@@ -151,6 +151,24 @@ impl Supervisor {
         self.last_target
     }
 
+    /// Whether a retune is in view at sample `k` (so the caller computes the band only
+    /// then): allowed, locked, healthy, no ramp running, the minimum interval elapsed, and
+    /// √ω̂y² farther than the dead band from the centre. The band guard clamps the target
+    /// of a retune; it does not trigger one by itself.
+    pub fn would_retune(&self, k: u64, healthy: bool, wy2: f64, centre_om: f64) -> bool {
+        if !(self.enabled && self.locked && healthy && self.ramping.is_none()) {
+            return false;
+        }
+        if let Some(e) = self.last_end
+            && k < e + self.min_interval
+        {
+            return false;
+        }
+        // |√wy2 − c| > db without a square root: wy2 outside [(c − db)², (c + db)²]
+        let (lo, hi) = (centre_om - self.deadband, centre_om + self.deadband);
+        wy2.is_finite() && wy2 > 0.0 && (wy2 < lo * lo || wy2 > hi * hi)
+    }
+
     /// Target ω for an estimated ω_y² and band.
     pub fn target(&self, wy2: f64, band: Option<(f64, f64)>) -> Option<f64> {
         if !(wy2.is_finite() && wy2 > 0.0) {
