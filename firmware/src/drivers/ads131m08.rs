@@ -36,6 +36,32 @@
 //! high-resolution mode, [`Osr::R8192`] gives exactly the estimator's 500 Hz
 //! ([`Clock::PARAGYRO`]); with any other CLKIN the rate is `f_CLKIN / (2·OSR)`
 //! ([`Clock::data_rate_hz`]) and the board must be clocked accordingly.
+//!
+//! # Example
+//!
+//! Reading one frame (here from `embedded-hal-mock`, with a frame built by
+//! [`Frame::encode`]) and converting it to micrometres:
+//!
+//! ```
+//! use embedded_hal_mock::eh1::spi::{Mock, Transaction as T};
+//! use paragyro_firmware::drivers::ads131m08::{self, Ads131m08, Frame, LockinCalibration, RawCode};
+//!
+//! let sent = Frame { response: 0x01FF, codes: [RawCode::from_u24(0x00_1000); 8] };
+//! let spi = Mock::new(&[
+//!     T::transaction_start(),
+//!     T::transfer_in_place(ads131m08::command_frame(&[ads131m08::opcode::NULL]).to_vec(), sent.encode().to_vec()),
+//!     T::transaction_end(),
+//! ]);
+//! let mut adc = Ads131m08::new(spi);
+//! let frame = adc.read_frame().unwrap();
+//! assert!(!frame.lockin_saturated());
+//! let um = LockinCalibration::UNITY.frame_to_um(&frame);
+//! assert_eq!(um.x0_um, 4096.0);
+//! adc.destroy().done();
+//!
+//! assert_eq!(ads131m08::crc16_ccitt(b"123456789"), 0x29B1);
+//! assert_eq!(RawCode::from_u24(0xFF_FFFF).get(), -1);
+//! ```
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
@@ -132,8 +158,8 @@ pub enum Error<E> {
     /// The ID register does not read `0x28xx`.
     BadId(u16),
     /// The device did not answer as expected: a command was not acknowledged (`RESET`,
-    /// `STANDBY`, `WAKEUP`, `WREG`), or a data frame's DRDY flags of the lock-in
-    /// channels are not all set.
+    /// `STANDBY`, `WAKEUP`, `WREG`), a verified register write read back a different
+    /// value, or a data frame's DRDY flags of the lock-in channels are not all set.
     NotReady,
 }
 
@@ -275,7 +301,10 @@ impl Mode {
     /// Register bits: `REGCRC_EN[13] RX_CRC_EN[12] CRC_TYPE[11]=0 RESET[10]=0
     /// WLENGTH[9:8]=01 TIMEOUT[4] DRDY_SEL[3:2]=00 DRDY_HiZ[1]=0 DRDY_FMT[0]=0`.
     pub const fn bits(self) -> u16 {
-        (self.regmap_crc as u16) << 13 | (self.rx_crc as u16) << 12 | 0x0100 | (self.spi_timeout as u16) << 4
+        (self.regmap_crc as u16) << 13
+            | (self.rx_crc as u16) << 12
+            | 0x0100
+            | (self.spi_timeout as u16) << 4
     }
 }
 
@@ -588,7 +617,8 @@ pub fn command_frame(words: &[u16]) -> [u8; FRAME_BYTES] {
     let (slots, _) = bytes.as_chunks_mut::<WORD_BYTES>();
     let mut slots = slots.iter_mut();
     let mut crc = CRC_SEED;
-    for (slot, &w) in slots.by_ref().zip(words.iter()) {
+    // `words` first: `zip` stops on it without consuming an extra slot.
+    for (&w, slot) in words.iter().zip(slots.by_ref()) {
         *slot = word_bytes(w);
         crc = crc16_ccitt_update(crc, slot);
     }
@@ -659,8 +689,8 @@ impl LockinCalibration {
             .zip(self.um_per_code.iter())
             .zip(self.offset_code.iter())
         {
-            // i64: the difference of two i32 cannot overflow.
-            *o = (i64::from(c.get()) - i64::from(*off)) as f32 * s;
+            // In i64 the difference of two i32 cannot overflow.
+            *o = i64::from(c.get()).saturating_sub(i64::from(*off)) as f32 * s;
         }
         let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = v;
         LockinUm {
@@ -764,27 +794,47 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
         }
     }
 
-    /// Write the MODE register.
+    /// Write one register and read it back (4 frames). The device executes a `WREG` even
+    /// when its input CRC fails and the acknowledgement covers only the command word, so
+    /// configuration writes are verified: a mismatch gives [`Error::NotReady`].
+    pub fn write_register_verified(
+        &mut self,
+        reg: Register,
+        value: u16,
+    ) -> Result<(), Error<SPI::Error>> {
+        self.write_register(reg, value)?;
+        if self.read_register(reg)? == value {
+            Ok(())
+        } else {
+            Err(Error::NotReady)
+        }
+    }
+
+    /// Write and verify the MODE register.
     pub fn set_mode(&mut self, mode: Mode) -> Result<(), Error<SPI::Error>> {
-        self.write_register(Register::Mode, mode.bits())
+        self.write_register_verified(Register::Mode, mode.bits())
     }
 
-    /// Write the CLOCK register.
+    /// Write and verify the CLOCK register.
     pub fn set_clock(&mut self, clock: Clock) -> Result<(), Error<SPI::Error>> {
-        self.write_register(Register::Clock, clock.bits())
+        self.write_register_verified(Register::Clock, clock.bits())
     }
 
-    /// Write GAIN1 and GAIN2.
+    /// Write and verify GAIN1 and GAIN2.
     pub fn set_gains(&mut self, gains: [Gain; CHANNELS]) -> Result<(), Error<SPI::Error>> {
         let [g0, g1, g2, g3, g4, g5, g6, g7] = gains;
-        self.write_register(Register::Gain1, Gain::register_bits([g0, g1, g2, g3]))?;
-        self.write_register(Register::Gain2, Gain::register_bits([g4, g5, g6, g7]))
+        self.write_register_verified(Register::Gain1, Gain::register_bits([g0, g1, g2, g3]))?;
+        self.write_register_verified(Register::Gain2, Gain::register_bits([g4, g5, g6, g7]))
     }
 
     /// Reset, check the ID, then write MODE, GAIN1/2 and CLOCK (in that order: the input
     /// CRC is checked from the MODE write on, conversions restart with the new OSR last).
     /// Returns the ID register.
-    pub fn init<D: DelayNs>(&mut self, delay: &mut D, config: &Config) -> Result<u16, Error<SPI::Error>> {
+    pub fn init<D: DelayNs>(
+        &mut self,
+        delay: &mut D,
+        config: &Config,
+    ) -> Result<u16, Error<SPI::Error>> {
         self.reset(delay)?;
         let id = self.check_id()?;
         self.set_mode(config.mode)?;
@@ -803,5 +853,29 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
         } else {
             Err(Error::NotReady)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_are_msb_aligned_with_a_zero_pad_byte() {
+        assert_eq!(word_bytes(0xA180), [0xA1, 0x80, 0x00]);
+        assert_eq!(FRAME_BYTES, 30);
+        assert_eq!(FRAME_WORDS_MINUS_ONE, 9);
+    }
+
+    #[test]
+    fn encode_decode_round_trip() {
+        let mut f = Frame {
+            response: 0x0512,
+            ..Frame::default()
+        };
+        for (i, c) in f.codes.iter_mut().enumerate() {
+            *c = RawCode::saturating_new(i as i32 * 1_000_003 - 4_000_000);
+        }
+        assert_eq!(Frame::decode(&f.encode()), Ok(f));
     }
 }
