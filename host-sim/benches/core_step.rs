@@ -6,70 +6,29 @@
 
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
 use paragyro_core::{Cplx, Estimator, Lockin, Real, Sample};
-use paragyro_sim::plant::{GyroSim, PlantInputs, SimConfig, Theta};
-use paragyro_sim::runner::core_config;
+use paragyro_sim::runner::{closed_loop, core_config};
 use paragyro_sim::scenario::Scenario;
 
-/// 1000 samples of the identify scenario from t = 1.5 s (f64), with the pump commands
-/// of an f64 core in the loop.
+/// 1000 samples of the identify scenario from t = 1.5 s, as the f64 core in the closed
+/// loop saw them.
 fn record() -> (Vec<Sample<f64>>, Scenario) {
-    let sc = Scenario::builtin("identify").expect("built-in");
+    let mut sc = Scenario::builtin("identify").expect("built-in");
+    sc.duration_s = 3.5;
     let cfg = core_config(&sc);
     let mut est: Estimator<f64> = cfg.build().expect("config");
-    let w0 = sc.omega0_rad_s();
-    let f0 = sc.sim.f0_hz;
-    let simcfg = SimConfig {
-        omega0_rad_s: w0,
-        noise_density: 1e-6,
-        ..SimConfig::default()
-    };
-    let mut sim = GyroSim::new(&simcfg, [0.01, 0.0, 0.0, 0.0]).expect("sim");
-    let mut pump = est.initial_pump_hz();
-    let mut scale = 1.0;
     let mut out = Vec::new();
-    for k in 0..1750u64 {
-        let t = k as f64 / 500.0;
-        let pa = sc.plant_at(t);
-        let li = sim.lockin();
-        let c = |p: (f64, f64)| Cplx::new(p.0, p.1);
-        let s = Sample {
-            lockin: Lockin {
-                x0_um: li.x0,
-                x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])],
-                y0_um: li.y0,
-                y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
-            },
-            accel_mps2: [98.0665, 98.0665],
-            pump_hz: pump,
-            pump_scale: scale,
-        };
-        let o = est.step(&s);
-        if k >= 750 {
-            out.push(s);
-        }
-        let u0 = PlantInputs {
-            omega: pump / (2.0 * f0),
-            s: scale,
-            ax: pa.accel_x,
-            ay: pa.accel_y,
-        };
-        let u1 = PlantInputs {
-            omega: o.pump_hz_next / (2.0 * f0),
-            s: o.pump_scale_next,
-            ax: pa.accel_x,
-            ay: pa.accel_y,
-        };
-        sim.advance(
-            &Theta {
-                drive: pa.theta_drive,
-                sense: pa.theta_sense,
-            },
-            &u0,
-            &u1,
-        );
-        pump = o.pump_hz_next;
-        scale = o.pump_scale_next;
-    }
+    closed_loop(
+        &sc,
+        sc.seed,
+        &mut est,
+        |_| {},
+        |ls| {
+            if ls.k >= 750 && out.len() < 1000 {
+                out.push(*ls.sample);
+            }
+        },
+    )
+    .expect("closed loop");
     (out, sc)
 }
 

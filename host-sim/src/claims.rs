@@ -46,11 +46,20 @@ fn theta(wy2: f64, alpha_y: f64) -> Theta {
 
 /// Mean |B1| over the last 0.2 s of `seconds` from rest at constant pump ω.
 fn steady_sense(omega: f64, th: &Theta, seconds: f64, at_s: Option<f64>) -> f64 {
-    let cfg = SimConfig { noise_density: 0.0, omega_max: omega * 1.01, ..SimConfig::default() };
+    let cfg = SimConfig {
+        noise_density: 0.0,
+        omega_max: omega * 1.01,
+        ..SimConfig::default()
+    };
     let Ok(mut sim) = GyroSim::new(&cfg, [0.01, 0.0, 0.0, 0.0]) else {
         return f64::NAN;
     };
-    let u = PlantInputs { omega, s: 1.0, ax: 0.0213, ay: 0.0213 };
+    let u = PlantInputs {
+        omega,
+        s: 1.0,
+        ax: 0.0213,
+        ay: 0.0213,
+    };
     let n = (seconds * cfg.fs_hz) as usize;
     let tail = (0.2 * cfg.fs_hz) as usize;
     let (mut sum, mut cnt) = (0.0, 0usize);
@@ -74,28 +83,85 @@ pub fn readings() -> Vec<Reading> {
     let ay = TABLE2.alpha_y;
     let w = 1.0265f64;
     let mut out = Vec::new();
-    let mut push = |name: &str, desc: &str, omega: f64, b: f64, a: f64, alpha_y: f64, at: Option<f64>| {
-        let before = steady_sense(omega, &theta(b, alpha_y), 1.5, at);
-        let after = steady_sense(omega, &theta(a, alpha_y), 1.5, at);
-        out.push(Reading {
-            name: name.into(),
-            description: desc.into(),
-            omega,
-            wy2_before: b,
-            wy2_after: a,
-            alpha_y,
-            sense_amp_before: before,
-            sense_amp_after: after,
-            ratio: after / before,
-        });
-    };
-    push("A", "ω = ω_y = √1.0265 (pump at 2ω_y); ω_y² 1.0265 → 1.03 (Table 2 as printed)", w.sqrt(), w, 1.03, ay, None);
-    push("B", "ω = 1.0265 read literally as the pump half-frequency; ω_y² 1.0265 → 1.03", w, w, 1.03, ay, None);
-    push("C", "as A with a linear sense mode (α_y = 0)", w.sqrt(), w, 1.03, 0.0, None);
-    push("D", "\"ω_y not squared\": ω_y 1.0265 → 1.03 (ω_y² 1.0537 → 1.0609), ω = 1.0265", w, w * w, 1.03 * 1.03, ay, None);
-    push("E", "as D with a linear sense mode", w, w * w, 1.03 * 1.03, 0.0, None);
-    push("F", "as A with α_y = 0.001537 (the value eq. 25 implies)", w.sqrt(), w, 1.03, 0.001537, None);
-    push("G", "as A, amplitudes read in the transient at τ = 3000 (44 ms) instead of steady state", w.sqrt(), w, 1.03, ay, Some(3000.0 / crate::plant::OMEGA0_RAD_S));
+    let mut push =
+        |name: &str, desc: &str, omega: f64, b: f64, a: f64, alpha_y: f64, at: Option<f64>| {
+            let before = steady_sense(omega, &theta(b, alpha_y), 1.5, at);
+            let after = steady_sense(omega, &theta(a, alpha_y), 1.5, at);
+            out.push(Reading {
+                name: name.into(),
+                description: desc.into(),
+                omega,
+                wy2_before: b,
+                wy2_after: a,
+                alpha_y,
+                sense_amp_before: before,
+                sense_amp_after: after,
+                ratio: after / before,
+            });
+        };
+    push(
+        "A",
+        "ω = ω_y = √1.0265 (pump at 2ω_y); ω_y² 1.0265 → 1.03 (Table 2 as printed)",
+        w.sqrt(),
+        w,
+        1.03,
+        ay,
+        None,
+    );
+    push(
+        "B",
+        "ω = 1.0265 read literally as the pump half-frequency; ω_y² 1.0265 → 1.03",
+        w,
+        w,
+        1.03,
+        ay,
+        None,
+    );
+    push(
+        "C",
+        "as A with a linear sense mode (α_y = 0)",
+        w.sqrt(),
+        w,
+        1.03,
+        0.0,
+        None,
+    );
+    push(
+        "D",
+        "\"ω_y not squared\": ω_y 1.0265 → 1.03 (ω_y² 1.0537 → 1.0609), ω = 1.0265",
+        w,
+        w * w,
+        1.03 * 1.03,
+        ay,
+        None,
+    );
+    push(
+        "E",
+        "as D with a linear sense mode",
+        w,
+        w * w,
+        1.03 * 1.03,
+        0.0,
+        None,
+    );
+    push(
+        "F",
+        "as A with α_y = 0.001537 (the value eq. 25 implies)",
+        w.sqrt(),
+        w,
+        1.03,
+        0.001537,
+        None,
+    );
+    push(
+        "G",
+        "as A, amplitudes read in the transient at τ = 3000 (44 ms) instead of steady state",
+        w.sqrt(),
+        w,
+        1.03,
+        ay,
+        Some(3000.0 / crate::plant::OMEGA0_RAD_S),
+    );
     out
 }
 
@@ -113,7 +179,11 @@ mod tests {
         // reading B rises instead of dropping (FINDINGS: 1.148)
         assert!(r[1].ratio > 1.0, "{:?}", r[1]);
         // none of the readings gives 20 % within ±3 points except possibly E
-        let near: Vec<&str> = r.iter().filter(|x| (x.ratio - 0.2).abs() < 0.03).map(|x| x.name.as_str()).collect();
+        let near: Vec<&str> = r
+            .iter()
+            .filter(|x| (x.ratio - 0.2).abs() < 0.03)
+            .map(|x| x.name.as_str())
+            .collect();
         assert!(near.iter().all(|n| *n == "E"), "{near:?}");
     }
 }

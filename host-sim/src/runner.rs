@@ -10,11 +10,12 @@ use std::time::Instant;
 
 use anyhow::Context;
 use paragyro_core::physics::{Physical, physical_from_theta};
-use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample};
+use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample, StepOutput};
 use serde_json::{Map, Value, json};
 
+use crate::lockin::LockinOut;
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
-use crate::scenario::{EventKind, Scenario};
+use crate::scenario::{EventKind, EventSpec, PlantAt, Scenario};
 use crate::trace::{Event, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow};
 
 /// Precision of the core instantiation.
@@ -169,28 +170,51 @@ pub struct SimRun {
     pub pump_centre_final_hz: f64,
 }
 
-/// Runs one scenario (no twin) with the core in precision `T`.
-pub fn simulate<T: Real>(
+/// What the closed loop shows a visitor at each 500 Hz sample, after the core's step.
+pub struct LoopSample<'a, T: Real> {
+    /// Sample index.
+    pub k: u64,
+    /// Time, s.
+    pub t_s: f64,
+    /// The plant in force over [t_k, t_{k+1}] (truth).
+    pub plant: &'a PlantAt,
+    /// The lock-in outputs at t_k (f64, µm = L0).
+    pub lockin: &'a LockinOut,
+    /// What the core was given.
+    pub sample: &'a Sample<T>,
+    /// What the core returned.
+    pub out: &'a StepOutput,
+    /// The core after the step.
+    pub est: &'a Estimator<T>,
+    /// The linearisation point θ_nom the rows of this sample were formed about.
+    pub nominal_before: &'a ([f64; 8], [f64; 6]),
+}
+
+/// The closed loop of the simulated gyro and the core, shared by every tool (runs,
+/// calibration, records, benchmarks): at sample k the scenario's control events that
+/// take effect by t_{k+1} go to the core, the lock-in outputs at t_k, the accelerations
+/// and the pump in effect go into `step`, `visit` sees the result, and the plant is
+/// integrated over [t_k, t_{k+1}] with the pump frequency and voltage scale sweeping
+/// linearly to the core's command. `on_control` sees each control event (for logs).
+pub fn closed_loop<T: Real>(
     sc: &Scenario,
-    opts: &RunOptions,
-    progress: &mut dyn FnMut(f64),
-) -> anyhow::Result<SimRun> {
-    let cfg = core_config(sc);
-    let mut est: Estimator<T> = cfg
-        .build()
-        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    seed: u64,
+    est: &mut Estimator<T>,
+    mut on_control: impl FnMut(&EventSpec),
+    mut visit: impl FnMut(&LoopSample<'_, T>),
+) -> anyhow::Result<()> {
     let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
-    let fs = cfg.fs_hz;
+    let fs = est.config().fs_hz;
     let simcfg = SimConfig {
         omega0_rad_s: w0,
         fs_hz: fs,
         steps_per_period: sc.sim.steps_per_period,
-        omega_max: omega_max(sc, &cfg),
+        omega_max: omega_max(sc, est.config()),
         lpf_order: sc.sim.lockin_lpf_order,
         lpf_hz: sc.sim.lockin_lpf_hz,
         noise_density: sc.sim.noise_pm_rthz * 1e-6,
-        seed: opts.seed.unwrap_or(sc.seed),
+        seed,
     };
     let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
     let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
@@ -198,24 +222,12 @@ pub fn simulate<T: Real>(
     let accel_si = L0_M * w0 * w0;
     let controls = sc.control_events();
     let mut next_ctrl = 0usize;
-    let mut events: Vec<Event> = sc
-        .events
-        .iter()
-        .filter(|e| !e.kind.is_control())
-        .map(|e| Event {
-            t_s: e.t_s,
-            what: describe(&e.kind),
-        })
-        .collect();
-    let mut trace = Vec::with_capacity(n as usize + 1);
     let mut pump_hz = est.initial_pump_hz();
     // the core's multiplier on the pump voltage scale (the amplitude part of the dither)
     let mut scale_mult = 1.0;
-    let mut last_progress = Instant::now();
     for k in 0..=n {
         let t = k as f64 / fs;
         let t_next = (k + 1) as f64 / fs;
-        // control events that take effect by the next sample instant
         while next_ctrl < controls.len() && controls[next_ctrl].t_s <= t_next + 1e-12 {
             let e = controls[next_ctrl];
             match e.kind {
@@ -233,10 +245,7 @@ pub fn simulate<T: Real>(
                 EventKind::Retune { enabled } => est.set_retune(enabled),
                 _ => {}
             }
-            events.push(Event {
-                t_s: e.t_s,
-                what: describe(&e.kind),
-            });
+            on_control(&e);
             next_ctrl += 1;
         }
         let pa = sc.plant_at(t);
@@ -257,40 +266,21 @@ pub fn simulate<T: Real>(
             pump_hz,
             pump_scale: T::from_f64(s_k),
         };
+        let nominal_before = est.nominal_theta();
         let out = est.step(&sample);
-        let (th1, th2) = est.theta();
-        let phys = physical_from_theta(&th1, &th2).as_array();
-        trace.push(TraceRow {
+        visit(&LoopSample {
+            k,
             t_s: t,
-            pump_hz,
-            pump_centre_hz: est.pump_centre_hz(),
-            pump_scale: s_k,
-            theta_drive_true: pa.theta_drive,
-            theta_sense_true: pa.theta_sense,
-            theta_drive_est: th1,
-            theta_sense_est: th2,
-            phys_true: pa.phys,
-            phys_est: phys,
-            rate_dps_true: pa.rate_dps,
-            rate_dps_est: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
-            drive_amp_um: li.x_abs(1),
-            sense_amp_um: li.y_abs(1),
-            health: out.health.bits(),
-            resets: est.counters().resets_drive + est.counters().resets_sense,
-            bad_samples: est.counters().bad_samples,
+            plant: &pa,
+            lockin: &li,
+            sample: &sample,
+            out: &out,
+            est,
+            nominal_before: &nominal_before,
         });
-        for (bit, what) in EVENT_NAMES {
-            if out.events & bit != 0 {
-                events.push(Event {
-                    t_s: t,
-                    what: what.to_string(),
-                });
-            }
-        }
         if k == n {
             break;
         }
-        // integrate the plant over [t_k, t_{k+1}]
         let pa1 = sc.plant_at(t_next);
         let theta = Theta {
             drive: pa.theta_drive,
@@ -311,11 +301,82 @@ pub fn simulate<T: Real>(
         sim.advance(&theta, &u0, &u1);
         pump_hz = out.pump_hz_next;
         scale_mult = out.pump_scale_next;
-        if k % 50 == 0 && last_progress.elapsed().as_millis() >= 100 {
-            progress(k as f64 / n as f64);
-            last_progress = Instant::now();
-        }
     }
+    Ok(())
+}
+
+/// Runs one scenario (no twin) with the core in precision `T`.
+pub fn simulate<T: Real>(
+    sc: &Scenario,
+    opts: &RunOptions,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<SimRun> {
+    let cfg = core_config(sc);
+    let mut est: Estimator<T> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let w0 = sc.omega0_rad_s();
+    let n = (sc.duration_s * cfg.fs_hz).round() as u64;
+    let mut events: Vec<Event> = sc
+        .events
+        .iter()
+        .filter(|e| !e.kind.is_control())
+        .map(|e| Event {
+            t_s: e.t_s,
+            what: describe(&e.kind),
+        })
+        .collect();
+    let mut control_log: Vec<Event> = Vec::new();
+    let mut trace = Vec::with_capacity(n as usize + 1);
+    let mut last_progress = Instant::now();
+    closed_loop(
+        sc,
+        opts.seed.unwrap_or(sc.seed),
+        &mut est,
+        |e| {
+            control_log.push(Event {
+                t_s: e.t_s,
+                what: describe(&e.kind),
+            })
+        },
+        |ls| {
+            let (th1, th2) = ls.est.theta();
+            let phys = physical_from_theta(&th1, &th2).as_array();
+            let counters = ls.est.counters();
+            trace.push(TraceRow {
+                t_s: ls.t_s,
+                pump_hz: ls.sample.pump_hz,
+                pump_centre_hz: ls.est.pump_centre_hz(),
+                pump_scale: ls.sample.pump_scale.to_f64(),
+                theta_drive_true: ls.plant.theta_drive,
+                theta_sense_true: ls.plant.theta_sense,
+                theta_drive_est: th1,
+                theta_sense_est: th2,
+                phys_true: ls.plant.phys,
+                phys_est: phys,
+                rate_dps_true: ls.plant.rate_dps,
+                rate_dps_est: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
+                drive_amp_um: ls.lockin.x_abs(1),
+                sense_amp_um: ls.lockin.y_abs(1),
+                health: ls.out.health.bits(),
+                resets: counters.resets_drive + counters.resets_sense,
+                bad_samples: counters.bad_samples,
+            });
+            for (bit, what) in EVENT_NAMES {
+                if ls.out.events & bit != 0 {
+                    events.push(Event {
+                        t_s: ls.t_s,
+                        what: what.to_string(),
+                    });
+                }
+            }
+            if ls.k % 50 == 0 && last_progress.elapsed().as_millis() >= 100 {
+                progress(ls.k as f64 / n as f64);
+                last_progress = Instant::now();
+            }
+        },
+    )?;
+    events.extend(control_log);
     events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     Ok(SimRun {
         trace,
@@ -512,86 +573,34 @@ pub fn calibrate_rows(sc: &Scenario, from_s: f64) -> anyhow::Result<([f64; 5], [
     let mut est: Estimator<f64> = cfg
         .build()
         .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
-    let f0 = sc.sim.f0_hz;
-    let w0 = sc.omega0_rad_s();
-    let fs = cfg.fs_hz;
-    let simcfg = SimConfig {
-        omega0_rad_s: w0,
-        fs_hz: fs,
-        steps_per_period: sc.sim.steps_per_period,
-        omega_max: omega_max(sc, &cfg),
-        lpf_order: sc.sim.lockin_lpf_order,
-        lpf_hz: sc.sim.lockin_lpf_hz,
-        noise_density: sc.sim.noise_pm_rthz * 1e-6,
-        seed: sc.seed,
-    };
-    let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
-    let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
-    let n = (sc.duration_s * fs).round() as u64;
-    let accel_si = L0_M * w0 * w0;
-    let mut pump_hz = est.initial_pump_hz();
-    let mut scale_mult = 1.0;
     let (mut s1, mut s2) = ([0.0f64; 5], [0.0f64; 5]);
     let mut count = 0usize;
-    for k in 0..=n {
-        let t = k as f64 / fs;
-        let pa = sc.plant_at(t);
-        let li = sim.lockin();
-        let c = |p: (f64, f64)| Cplx::new(p.0, p.1);
-        let sample = Sample {
-            lockin: Lockin {
-                x0_um: li.x0,
-                x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])],
-                y0_um: li.y0,
-                y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
-            },
-            accel_mps2: [pa.accel_x * accel_si, pa.accel_y * accel_si],
-            pump_hz,
-            pump_scale: sc.pump_scale_at(t) * scale_mult,
-        };
-        let (n1, n2) = est.nominal_theta();
-        let out = est.step(&sample);
-        if t >= from_s {
-            let rows = est.last_rows();
+    closed_loop(
+        sc,
+        sc.seed,
+        &mut est,
+        |_| {},
+        |ls| {
+            if ls.t_s < from_s {
+                return;
+            }
+            let (n1, n2) = ls.nominal_before;
+            let rows = ls.est.last_rows();
             for r in 0..5 {
                 let mut e1 = rows.drive_y[r];
                 for j in 0..8 {
-                    e1 -= rows.drive_phi[r][j] * (pa.theta_drive[j] - n1[j]);
+                    e1 -= rows.drive_phi[r][j] * (ls.plant.theta_drive[j] - n1[j]);
                 }
                 let mut e2 = rows.sense_y[r];
                 for j in 0..6 {
-                    e2 -= rows.sense_phi[r][j] * (pa.theta_sense[j] - n2[j]);
+                    e2 -= rows.sense_phi[r][j] * (ls.plant.theta_sense[j] - n2[j]);
                 }
                 s1[r] += e1 * e1;
                 s2[r] += e2 * e2;
             }
             count += 1;
-        }
-        if k == n {
-            break;
-        }
-        let t_next = (k + 1) as f64 / fs;
-        let pa1 = sc.plant_at(t_next);
-        let theta = Theta {
-            drive: pa.theta_drive,
-            sense: pa.theta_sense,
-        };
-        let u0 = PlantInputs {
-            omega: pump_hz / (2.0 * f0),
-            s: sc.pump_scale_at(t) * scale_mult,
-            ax: pa.accel_x,
-            ay: pa.accel_y,
-        };
-        let u1 = PlantInputs {
-            omega: out.pump_hz_next / (2.0 * f0),
-            s: sc.pump_scale_at(t_next) * out.pump_scale_next,
-            ax: pa1.accel_x,
-            ay: pa1.accel_y,
-        };
-        sim.advance(&theta, &u0, &u1);
-        pump_hz = out.pump_hz_next;
-        scale_mult = out.pump_scale_next;
-    }
+        },
+    )?;
     anyhow::ensure!(count > 10, "calibration window too short");
     let noise = if sc.sim.noise_pm_rthz > 0.0 {
         sc.sim.noise_pm_rthz
