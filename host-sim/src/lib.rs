@@ -3,7 +3,10 @@
 // Index loops over small fixed arrays read like the math they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod averaged;
+pub mod claims;
 pub mod lockin;
+pub mod paper001;
 pub mod plant;
 pub mod report;
 pub mod results;
