@@ -114,7 +114,7 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
 // ---------------------------------------------------------------------------------------------
 
 /// The `trace.csv` header: t_s, pump_hz, pump_centre_hz, pump_scale, th1*_true, th2*_true,
-/// th1*_est, th2*_est, <phys>_true, <phys>_est, rate_dps_true, rate_dps_est, drive_amp_um,
+/// th1*_est, th2*_est, `<phys>_true`, `<phys>_est`, rate_dps_true, rate_dps_est, drive_amp_um,
 /// sense_amp_um, one 0/1 column per health flag, resets, bad_samples.
 pub fn csv_header() -> Vec<String> {
     let mut h: Vec<String> = ["t_s", "pump_hz", "pump_centre_hz", "pump_scale"]

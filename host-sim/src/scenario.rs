@@ -652,7 +652,7 @@ pub struct PlantAt {
     pub theta_sense: [f64; 6],
     /// Physical parameters in `PHYS_NAMES` order, consistent with the θ (corrected Table 3).
     pub phys: [f64; 12],
-    /// Angular rate, °/s (consistent with γ = phys[10]).
+    /// Angular rate, °/s (consistent with γ = `phys[10]`).
     pub rate_dps: f64,
     /// Non-dimensional drive-axis acceleration ã_x = a_x/(L0 ω0²).
     pub accel_x: f64,
