@@ -12,6 +12,10 @@
 //! paragyro-sim averaged [--out DIR]                   seed 000's averaged model, band, sweeps
 //! paragyro-sim paper-001 [--out DIR]                  seed 001's stationary regimes, Figs 3–4
 //! paragyro-sim paper-claims                           the "20 %" claim, reading by reading
+//! paragyro-sim record <scenario|file.toml>            a simulated record (docs/record-format.md)
+//!              --out FILE.csv [--seed N]               and its truth, FILE.truth.json
+//! paragyro-sim replay FILE.csv --out DIR              the core open-loop on a record:
+//!              [--precision f32|f64]                   estimates.csv, summary.json
 //! ```
 //!
 //! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
@@ -25,6 +29,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use paragyro_sim::record;
 use paragyro_sim::report;
 use paragyro_sim::runner::{self, Precision, RunOptions};
 use paragyro_sim::scenario::Scenario;
@@ -101,6 +106,29 @@ enum Command {
     /// Seed 000's "sense amplitude drops to 20 %" claim, reading by reading (full-rate plant).
     #[command(name = "paper-claims")]
     PaperClaims,
+    /// Simulate a scenario as a record (CSV at 500 Hz, docs/record-format.md); its truth
+    /// goes to FILE.truth.json beside it.
+    Record {
+        /// Built-in scenario name or path to a scenario TOML file.
+        scenario: String,
+        /// The record to write (the truth goes to FILE.truth.json).
+        #[arg(long, value_name = "FILE.csv")]
+        out: PathBuf,
+        /// Override the scenario's noise seed.
+        #[arg(long)]
+        seed: Option<u64>,
+    },
+    /// Run the core open-loop on a record; write estimates.csv and summary.json.
+    Replay {
+        /// The record (CSV, docs/record-format.md).
+        record: PathBuf,
+        /// Output directory (created if needed).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Precision of the core.
+        #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
+        precision: PrecisionArg,
+    },
     /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
     Demo {
         /// Output directory (created if needed).
@@ -267,6 +295,58 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
                     "| {} | {} | {:.4} | {:.4} | {:.3} |\n",
                     r.name, r.description, r.sense_amp_before, r.sense_amp_after, r.ratio
                 ));
+            }
+            say(out, &text)
+        }
+        Command::Record {
+            scenario,
+            out: file,
+            seed,
+        } => {
+            let sc = load(&scenario)?;
+            let opts = record::RecordOptions {
+                seed,
+                ..record::RecordOptions::default()
+            };
+            let (files, rec) = record::write_simulated_record(&sc, &file, &opts, &mut |_| {})
+                .with_context(|| format!("cannot record scenario '{}'", sc.name))
+                .map_err(fail(EXIT_RUN))?;
+            say(
+                out,
+                &format!(
+                    "Wrote {} ({} samples, {} s at {} Hz) and its truth {}\n",
+                    files.csv.display(),
+                    rec.rows.len(),
+                    rec.duration_s(),
+                    rec.header.fs_hz,
+                    files.truth.display()
+                ),
+            )
+        }
+        Command::Replay {
+            record: file,
+            out: dir,
+            precision,
+        } => {
+            let rec = record::read_record(&file).map_err(|e| Failure {
+                code: EXIT_LOAD,
+                error: anyhow::Error::new(e),
+            })?;
+            let mut err = std::io::stderr();
+            for w in &rec.warnings {
+                let _ = writeln!(err, "warning: {w}");
+            }
+            let source = file.display().to_string();
+            let res = record::write_replay(&rec, &source, &dir, precision.into())
+                .map_err(fail(EXIT_RUN))?;
+            let mut text = res.text;
+            text.push_str(&format!(
+                "Wrote {} files to {}:\n",
+                res.files.len(),
+                dir.display()
+            ));
+            for f in &res.files {
+                text.push_str(&format!("  {}\n", f.display()));
             }
             say(out, &text)
         }
@@ -485,6 +565,53 @@ mod tests {
             out.contains("pump jump to the sense resonance (26"),
             "{out}"
         );
+    }
+
+    #[test]
+    fn record_then_replay() {
+        let dir = std::env::temp_dir().join(format!("paragyro-cli-record-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let csv = dir.join("identify.csv");
+        let (code, out, err) = cli(&[
+            "record",
+            "identify",
+            "--out",
+            csv.to_str().unwrap(),
+            "--seed",
+            "3",
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            out.starts_with(&format!("Wrote {}", csv.display())),
+            "{out}"
+        );
+        assert!(dir.join("identify.truth.json").exists());
+        let rdir = dir.join("replay");
+        let (code, out, err) = cli(&[
+            "replay",
+            csv.to_str().unwrap(),
+            "--out",
+            rdir.to_str().unwrap(),
+            "--precision",
+            "f64",
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(out.starts_with("Replayed "), "{out}");
+        assert!(rdir.join("estimates.csv").exists() && rdir.join("summary.json").exists());
+        // a malformed record: exit 2, file:line:col in the message
+        std::fs::write(&csv, "# format: paragyro-record 2\n").unwrap();
+        let (code, _, err) = cli(&[
+            "replay",
+            csv.to_str().unwrap(),
+            "--out",
+            rdir.to_str().unwrap(),
+        ]);
+        assert_eq!(code, EXIT_LOAD);
+        assert!(
+            err.starts_with(&format!("error: {}:1:11: header 'format'", csv.display())),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
