@@ -24,7 +24,9 @@
     )
 )]
 
+pub mod app;
 pub mod drivers;
+pub mod replay;
 
 pub use drivers::ad9959::Ad9959;
 pub use drivers::ads131m08::Ads131m08;

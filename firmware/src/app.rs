@@ -1,0 +1,705 @@
+//! The application layer: the board's chips bound to the estimator, one [`App::tick`] per
+//! 500 Hz sample.
+//!
+//! # Design
+//!
+//! **Timing.** The two ADS131M08s (drive axis: X0, A1..A3; sense axis: Y0, B1..B3)
+//! convert simultaneously from one CLKIN at 500 Hz; the falling edge of DRDY is the
+//! board's only time base and its interrupt runs [`App::tick`], in this order:
+//!
+//! 1. **frames first**: both ADC frames, then the ADXL355 burst. The ADC must be read
+//!    within one data period, and reading before any computation keeps the read at a
+//!    fixed, short latency after DRDY;
+//! 2. the [`Sample`]: lock-in outputs in µm through each axis' [`LockinCalibration`] (the
+//!    single conversion point), the accelerometer's X and Y (drive, sense axis), and the
+//!    pump frequency and scale *in effect* (what the DDS realised at the previous
+//!    IO_UPDATE, not what the core asked for);
+//! 3. [`Estimator::step`];
+//! 4. **DDS written last**: the core's `pump_hz_next`, clamped to the [`PumpGuard`], is
+//!    planned ([`PumpPlan`]: pump 2k, references k and 3k, so the lock-in references stay
+//!    phase-locked to the pump) and written together with the pump amplitude;
+//! 5. **IO_UPDATE at the very end** ([`IoUpdate::pulse`], only when the driver has buffered
+//!    words): the new frequency and amplitude act from here on, so they are the ones in
+//!    effect at the next sample instant, and the realised `PumpPlan::pump_hz` becomes the
+//!    known pump of the next [`Sample`].
+//!
+//! The tick is bounded: two 30-byte frames, one 14-byte burst, one `step`, at most eight
+//! short DDS transactions; no allocation, no loop that depends on data, no panic. A
+//! write is skipped when its word did not change, so a steady pump costs no DDS traffic.
+//!
+//! **Bad inputs are the core's business.** The firmware never drops a sample: a frame
+//! that fails (SPI error, CRC error, DRDY flags not set) turns that axis' seven channels
+//! into NaN, a failed or absent accelerometer turns the acceleration into NaN, and the
+//! core flags, counts and skips the sample (and holds θ̂). A lock-in code at the ADC's
+//! full scale, or an accelerometer code at the end of its 20-bit range, is replaced by a
+//! value beyond the core's full scale ([`paragyro_core::config::MonitorConfig`]), so the
+//! core counts it as saturated even when the ADC clips below the core's limit. The
+//! firmware's own [`FwCounters`] say which chip failed and how.
+//!
+//! **DDS errors.** Words reach the DDS cores only at IO_UPDATE, so a tick whose writes
+//! fail does not pulse: the DDS keeps its old words, the pump in effect (and so the next
+//! sample's known pump) stays the previous one, and the failure is counted. The buffers
+//! may then hold a partial write (e.g. a new pump word next to an old reference word), so
+//! the next tick rewrites every word before it pulses again. After a bus fault the
+//! AD9959's serial port may also need its SYNC_IO pin; that belongs to the board.
+//!
+//! **Staircase against a linear sweep (known limitation).** The DDS steps its
+//! frequency at IO_UPDATE (to a word quantised to 2·f_SYSCLK/2³² ≈ 0.233 Hz at 500 MHz),
+//! while the core's replica of the lock-in low-pass is discretised first-order-hold
+//! exactly, i.e. it assumes the pump sweeps *linearly* from the value of one sample to the
+//! next ([`paragyro_core::lpf`]). The quantisation itself costs nothing systematic: the
+//! core is told the realised word. The *shape* does: with the pulse at τ ≈ 0.2–0.3 ms after
+//! DRDY, each new value is held over `[t_k + τ, t_(k+1) + τ)`, centred `T/2 − τ` ≈ 0.7–0.8
+//! ms *before* the sample instant the core attributes it to, where a linear sweep would be
+//! centred on it. The known pump deviation the core builds therefore lags the true one by
+//! about `T/2 − τ`: for the 5 Hz, ±21.6 Hz frequency dither an error of
+//! 2π·5 Hz·0.75 ms ≈ 2.4 % of the dither (≈ 0.5 Hz peak), in quadrature with it (the
+//! amplitude dither has the same lag). That is the kind of error the replica exists to
+//! remove (an uncompensated 2 ms lock-in delay makes row errors about ten times the
+//! Coriolis term); scaled linearly, a 0.75 ms mismatch would give a bias of a few
+//! Coriolis terms in the dither-identified θ. It has not been measured: the host
+//! simulator should model the DDS as a staircase to quantify it. Two remedies, both
+//! future work:
+//! * the AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, rising/falling
+//!   delta words and ramp rate, started by a profile pin at the sample instant) makes the
+//!   realised pump the linear sweep the replica assumes, up to the sweep's own steps;
+//! * cheaper: pulse IO_UPDATE from a timer at DRDY + T/2 (an [`IoUpdate`] implementation
+//!   may arm such a timer instead of toggling a pin): the staircase is then centred on the
+//!   sample instants and agrees with the linear sweep to second order (no lag; a
+//!   `sinc` against `sinc²` amplitude difference of ~2e-4 at 5 Hz).
+//!
+//! **The guard.** The core keeps the pump inside the drive's parametric band by itself
+//! (its retune targets stay a margin inside the band, and it never ramps outside). The
+//! [`PumpGuard`] is the last line, independent of the estimate: a window
+//! `[min_hz, max_hz]` set by the board (the band of the design, with margin). Every
+//! command is clamped to it and every clamp counted; a non-finite command keeps the pump
+//! where it is. The realised (quantised) word is also kept inside: if rounding would leave
+//! the window, the next word inwards is used. Since the sample carries the pump actually in
+//! effect, a clamp never misleads the estimator; it only means the core's scheduler and
+//! the DDS disagree, which [`FwCounters::guard_clamps`] makes visible.
+
+use embedded_hal::spi::SpiDevice;
+use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOutput};
+
+use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
+use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration, LockinUm};
+use crate::drivers::adxl355::Adxl355;
+
+/// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
+///
+/// Implemented for closures (`&mut || pin.set_high()…`) and for [`PinIoUpdate`]; the
+/// replay board uses [`crate::replay::NoIoUpdate`] or [`crate::replay::CaptureIo`]. An
+/// implementation may also arm a timer that pulses the pin later in the sample period.
+pub trait IoUpdate {
+    /// Pulse IO_UPDATE once.
+    fn pulse(&mut self);
+}
+
+impl<F: FnMut()> IoUpdate for F {
+    fn pulse(&mut self) {
+        self()
+    }
+}
+
+/// IO_UPDATE on an [`embedded_hal::digital::OutputPin`]: high, then low. The AD9959 needs
+/// the pulse high for at least one SYNC_CLK period (8 ns at 500 MHz SYSCLK), which two
+/// back-to-back GPIO writes of a Cortex-M4 exceed. Pin errors are ignored (GPIO writes
+/// are infallible on the STM32F4).
+#[derive(Debug)]
+pub struct PinIoUpdate<P>(pub P);
+
+impl<P: embedded_hal::digital::OutputPin> IoUpdate for PinIoUpdate<P> {
+    fn pulse(&mut self) {
+        let _ = self.0.set_high();
+        let _ = self.0.set_low();
+    }
+}
+
+/// The chips of the board, each behind its own [`SpiDevice`] (chip select included).
+#[derive(Debug)]
+pub struct Chips<AX, AY, XL, DDS> {
+    /// Drive-axis lock-in ADC: X0, A1, A2, A3 (re, im).
+    pub adc_x: Ads131m08<AX>,
+    /// Sense-axis lock-in ADC: Y0, B1, B2, B3 (re, im).
+    pub adc_y: Ads131m08<AY>,
+    /// Accelerometer: X along the drive axis, Y along the sense axis.
+    pub accel: Adxl355<XL>,
+    /// Pump (channel 0) and phase-locked lock-in references (channels 1, 2).
+    pub dds: Ad9959<DDS>,
+}
+
+/// The last line of defence on the pump frequency: every command is clamped to
+/// `[min_hz, max_hz]` (the drive's parametric band with margin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PumpGuard {
+    /// Lowest pump frequency ever commanded, Hz.
+    pub min_hz: f64,
+    /// Highest pump frequency ever commanded, Hz.
+    pub max_hz: f64,
+}
+
+impl PumpGuard {
+    /// The window `[min_hz, max_hz]` (validated by [`App::new`]).
+    pub const fn new(min_hz: f64, max_hz: f64) -> Self {
+        Self { min_hz, max_hz }
+    }
+
+    /// `centre_hz ± half_width_hz`.
+    pub fn around(centre_hz: f64, half_width_hz: f64) -> Self {
+        Self {
+            min_hz: centre_hz - half_width_hz,
+            max_hz: centre_hz + half_width_hz,
+        }
+    }
+
+    /// `min_hz ≤ hz ≤ max_hz` (false for NaN).
+    pub fn contains(&self, hz: f64) -> bool {
+        hz >= self.min_hz && hz <= self.max_hz
+    }
+
+    /// `hz` clamped to the window (never panics; NaN gives `min_hz`).
+    pub fn clamp(&self, hz: f64) -> f64 {
+        hz.max(self.min_hz).min(self.max_hz)
+    }
+
+    /// The middle of the window.
+    pub fn midpoint(&self) -> f64 {
+        0.5 * (self.min_hz + self.max_hz)
+    }
+
+    /// The DDS plan for `hz` clamped to the window, with a realised pump inside the
+    /// window: if rounding to the word grid would leave it, the next word inwards. `None`
+    /// if no pump word fits (window narrower than a step) or the DDS cannot make it.
+    pub fn plan(&self, hz: f64, sysclk_hz: f64) -> Option<PumpPlan> {
+        let plan = PumpPlan::new(self.clamp(hz), sysclk_hz).ok()?;
+        // one pump step: the pump word 2k moves by 2
+        let step = 2.0 * sysclk_hz / FTW_SCALE;
+        let realised = plan.pump_hz();
+        let plan = if realised > self.max_hz {
+            PumpPlan::new(realised - step, sysclk_hz).ok()?
+        } else if realised < self.min_hz {
+            PumpPlan::new(realised + step, sysclk_hz).ok()?
+        } else {
+            plan
+        };
+        self.contains(plan.pump_hz()).then_some(plan)
+    }
+
+    fn validate(&self, sysclk_hz: f64, initial_hz: f64) -> Result<(), ConfigError> {
+        let err = |reason| ConfigError {
+            field: "guard",
+            reason,
+        };
+        if !(self.min_hz.is_finite() && self.max_hz.is_finite() && self.min_hz > 0.0) {
+            return Err(err("min_hz and max_hz must be finite and > 0"));
+        }
+        if self.min_hz >= self.max_hz {
+            return Err(err("min_hz must be below max_hz"));
+        }
+        if self.plan(self.min_hz, sysclk_hz).is_none()
+            || self.plan(self.max_hz, sysclk_hz).is_none()
+        {
+            return Err(err(
+                "the DDS cannot make a pump inside the window (too narrow, or 3Ω at Nyquist)",
+            ));
+        }
+        if !self.contains(initial_hz) {
+            return Err(err("the configured pump centre is outside the window"));
+        }
+        Ok(())
+    }
+}
+
+/// How the core's pump scale `s = (V/V_A0)²` maps to the DDS amplitude word.
+///
+/// The word commanded for the core's multiplier `m` (`StepOutput::pump_scale_next`) is
+/// `AmplitudeWord::from_scale(m · base_scale / full_scale)`, and the scale in effect that
+/// the next [`Sample`] carries is `word.scale() · full_scale`. The DDS clips at the full
+/// word: with `full_scale < base_scale · (1 + dither.scale_frac)` the top of the amplitude
+/// dither is clipped (the core is told the clipped value, so the estimate stays
+/// consistent; only the amplitude excitation shrinks).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PumpAmplitude {
+    /// Operating pump scale `s_base = (V_base/V_A0)²` (1: the configured `pump_amp_ref_v`).
+    pub base_scale: f32,
+    /// `s` of the full DDS word (ASF 1023) after the board's analog gain, `(V_full/V_A0)²`.
+    pub full_scale: f32,
+}
+
+impl PumpAmplitude {
+    /// `s_base = 1` and the full DDS word makes `V_A0`.
+    pub const UNITY: PumpAmplitude = PumpAmplitude {
+        base_scale: 1.0,
+        full_scale: 1.0,
+    };
+
+    /// The word for the core's scale multiplier `m`.
+    pub fn word_for(&self, multiplier: f64) -> AmplitudeWord {
+        AmplitudeWord::from_scale(multiplier as f32 * self.base_scale / self.full_scale)
+    }
+
+    /// The pump scale `s` a word realises.
+    pub fn realised(&self, word: AmplitudeWord) -> f32 {
+        word.scale() * self.full_scale
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        let ok = |v: f32| v.is_finite() && v > 0.0;
+        if ok(self.base_scale) && ok(self.full_scale) {
+            Ok(())
+        } else {
+            Err(ConfigError {
+                field: "pump_amplitude",
+                reason: "base_scale and full_scale must be finite and > 0",
+            })
+        }
+    }
+}
+
+/// Firmware-side fault counters since start-up (saturating). The core keeps its own
+/// ([`Estimator::counters`]): bad samples by cause, stuck channels, resets, retunes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FwCounters {
+    /// ADC frames lost to an SPI error (either axis).
+    pub adc_spi_errors: u32,
+    /// ADC frames that failed their CRC.
+    pub adc_crc_errors: u32,
+    /// ADC frames whose lock-in DRDY flags were not all set.
+    pub adc_not_ready: u32,
+    /// ADC frames with a lock-in channel at full scale.
+    pub adc_saturated: u32,
+    /// Accelerometer reads that failed (SPI error, not ready, absent device).
+    pub accel_errors: u32,
+    /// Accelerometer samples with X or Y at the end of the code range.
+    pub accel_saturated: u32,
+    /// Ticks whose DDS writes failed (the pump in effect was kept).
+    pub dds_errors: u32,
+    /// Pump commands refused by the guard: clamped to the window, or not finite.
+    pub guard_clamps: u32,
+    /// Ticks run.
+    pub ticks: u32,
+}
+
+/// Bits of [`TickReport::faults`].
+pub mod fault {
+    /// The drive-axis ADC frame was lost (channels NaN).
+    pub const ADC_X: u8 = 1;
+    /// The sense-axis ADC frame was lost (channels NaN).
+    pub const ADC_Y: u8 = 2;
+    /// The accelerometer read failed (acceleration NaN).
+    pub const ACCEL: u8 = 4;
+    /// A lock-in or accelerometer code was at full scale.
+    pub const SATURATED: u8 = 8;
+    /// No pump was in effect at the sample (never started, or every DDS write failed).
+    pub const PUMP_UNKNOWN: u8 = 16;
+    /// The DDS writes of this tick failed; the previous pump stays in effect.
+    pub const DDS: u8 = 32;
+    /// The guard clamped or refused the core's command.
+    pub const GUARD: u8 = 64;
+    /// Faults that make the firmware's sample incomplete.
+    pub const SAMPLE: u8 = ADC_X | ADC_Y | ACCEL | SATURATED | PUMP_UNKNOWN;
+}
+
+/// What one [`App::tick`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickReport {
+    /// The core's output for this sample (its own verdict on the sample is
+    /// `out.health.inputs_valid`, which also covers stuck channels).
+    pub out: StepOutput,
+    /// The firmware delivered a complete sample: every chip read, no code at full scale,
+    /// a known pump (no bit of [`fault::SAMPLE`]).
+    pub sample_ok: bool,
+    /// Realised pump frequency in effect from now on, i.e. at the next sample, Hz.
+    pub pump_hz: f64,
+    /// Pump scale `s` in effect from now on.
+    pub pump_scale: f32,
+    /// [`fault`] bits of this tick.
+    pub faults: u8,
+}
+
+/// The pump the DDS is running (applied by the last IO_UPDATE).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct InEffect {
+    plan: PumpPlan,
+    asf: AmplitudeWord,
+}
+
+/// The firmware application: chips, calibrations, the `f32` estimator and the pump.
+#[derive(Debug)]
+pub struct App<AX, AY, XL, DDS> {
+    chips: Chips<AX, AY, XL, DDS>,
+    est: Estimator<f32>,
+    cal_x: LockinCalibration,
+    cal_y: LockinCalibration,
+    guard: PumpGuard,
+    amplitude: PumpAmplitude,
+    /// A lock-in value beyond the core's full scale (saturated codes), µm.
+    lockin_beyond_um: f32,
+    /// An acceleration beyond the core's full scale, m/s².
+    accel_beyond_mps2: f32,
+    pump: Option<InEffect>,
+    /// The DDS buffers may differ from the words in effect: rewrite all before a pulse.
+    dirty: bool,
+    counters: FwCounters,
+}
+
+/// A value beyond `full_scale` (twice it, or `f32::MAX` if that overflows).
+fn beyond(full_scale: f64) -> f32 {
+    let v = (2.0 * full_scale) as f32;
+    if v.is_finite() { v } else { f32::MAX }
+}
+
+/// The 20-bit code range of the ADXL355 ends at these codes (clipping).
+const ACCEL_CODE_MAX: i32 = 0x7_FFFF;
+const ACCEL_CODE_MIN: i32 = -0x8_0000;
+
+/// Lock-in values of one axis in channel order (X0, A1re, A1im, A2re, A2im, A3re, A3im).
+fn channels(u: &LockinUm) -> [f32; LOCKIN_CHANNELS] {
+    let [r1, r2, r3] = u.re_um;
+    let [i1, i2, i3] = u.im_um;
+    [u.x0_um, r1, i1, r2, i2, r3, i3]
+}
+
+fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
+    let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = x;
+    let [y0, b1r, b1i, b2r, b2i, b3r, b3i] = y;
+    Lockin {
+        x0_um: x0,
+        x_um: [
+            Cplx::new(a1r, a1i),
+            Cplx::new(a2r, a2i),
+            Cplx::new(a3r, a3i),
+        ],
+        y0_um: y0,
+        y_um: [
+            Cplx::new(b1r, b1i),
+            Cplx::new(b2r, b2i),
+            Cplx::new(b3r, b3i),
+        ],
+    }
+}
+
+fn bump(c: &mut u32) {
+    *c = c.saturating_add(1);
+}
+
+/// One axis: the frame in µm, saturated channels beyond the core's full scale, or all
+/// NaN if the frame was lost. Returns the values and the fault bits.
+fn read_axis<S: SpiDevice>(
+    adc: &mut Ads131m08<S>,
+    cal: &LockinCalibration,
+    beyond_um: f32,
+    lost_bit: u8,
+    counters: &mut FwCounters,
+) -> ([f32; LOCKIN_CHANNELS], u8) {
+    match adc.read_frame() {
+        Ok(frame) => {
+            let mut v = channels(&cal.frame_to_um(&frame));
+            if !frame.lockin_saturated() {
+                return (v, 0);
+            }
+            for (val, code) in v.iter_mut().zip(frame.lockin_codes().iter()) {
+                if code.is_saturated() {
+                    *val = if code.get() > 0 {
+                        beyond_um
+                    } else {
+                        -beyond_um
+                    };
+                }
+            }
+            bump(&mut counters.adc_saturated);
+            (v, fault::SATURATED)
+        }
+        Err(e) => {
+            bump(match e {
+                ads131m08::Error::Spi(_) => &mut counters.adc_spi_errors,
+                ads131m08::Error::Crc { .. } => &mut counters.adc_crc_errors,
+                // `read_frame` gives no BadId; an unexpected answer is "not ready" too
+                ads131m08::Error::NotReady | ads131m08::Error::BadId(_) => {
+                    &mut counters.adc_not_ready
+                }
+            });
+            ([f32::NAN; LOCKIN_CHANNELS], lost_bit)
+        }
+    }
+}
+
+/// X and Y acceleration (drive, sense axis), NaN on any error, beyond the core's full
+/// scale where the code clipped.
+fn read_accel<S: SpiDevice>(
+    accel: &mut Adxl355<S>,
+    beyond_mps2: f32,
+    counters: &mut FwCounters,
+) -> ([f32; 2], u8) {
+    match accel.read_sample() {
+        Ok(s) => {
+            let [ax, ay, _] = s.accel_mps2;
+            let mut faults = 0;
+            let mut clip = |v: f32, raw: i32| {
+                if raw >= ACCEL_CODE_MAX || raw <= ACCEL_CODE_MIN {
+                    faults = fault::SATURATED;
+                    if raw > 0 { beyond_mps2 } else { -beyond_mps2 }
+                } else {
+                    v
+                }
+            };
+            let a = [clip(ax, s.raw.x), clip(ay, s.raw.y)];
+            if faults != 0 {
+                bump(&mut counters.accel_saturated);
+            }
+            (a, faults)
+        }
+        // SPI error, not ready, absent device (STATUS 0xFF reads as not ready): alike
+        Err(_) => {
+            bump(&mut counters.accel_errors);
+            ([f32::NAN; 2], fault::ACCEL)
+        }
+    }
+}
+
+/// Write what changed (everything when `rewrite`), stopping at the first error.
+fn write_pump<S: SpiDevice>(
+    dds: &mut Ad9959<S>,
+    plan: Option<&PumpPlan>,
+    asf: Option<AmplitudeWord>,
+) -> Result<(), ad9959::Error<S::Error>> {
+    if let Some(plan) = plan {
+        dds.apply_plan(plan)?;
+    }
+    if let Some(asf) = asf {
+        dds.set_amplitude(Channel::PUMP, asf)?;
+    }
+    Ok(())
+}
+
+impl<AX, AY, XL, DDS> App<AX, AY, XL, DDS>
+where
+    AX: SpiDevice,
+    AY: SpiDevice,
+    XL: SpiDevice,
+    DDS: SpiDevice,
+{
+    /// Binds initialised chips to the `f32` estimator built from `cfg`, with one
+    /// calibration per axis and the pump guard (amplitude mapping
+    /// [`PumpAmplitude::UNITY`]; see [`App::set_pump_amplitude`]). No bus traffic. Fails
+    /// on an invalid `cfg` (the core's error), or with field `"guard"` if the window is
+    /// not finite and increasing, holds no realisable pump word, or does not contain the
+    /// configured pump centre.
+    pub fn new(
+        chips: Chips<AX, AY, XL, DDS>,
+        cfg: &Config,
+        cal_x: LockinCalibration,
+        cal_y: LockinCalibration,
+        guard: PumpGuard,
+    ) -> Result<Self, ConfigError> {
+        let est = cfg.build::<f32>()?;
+        guard.validate(chips.dds.sysclk_hz(), est.initial_pump_hz())?;
+        Ok(Self {
+            chips,
+            cal_x,
+            cal_y,
+            guard,
+            amplitude: PumpAmplitude::UNITY,
+            lockin_beyond_um: beyond(cfg.monitor.full_scale_um),
+            accel_beyond_mps2: beyond(cfg.monitor.accel_full_scale_mps2),
+            est,
+            pump: None,
+            dirty: true,
+            counters: FwCounters::default(),
+        })
+    }
+
+    /// Changes the amplitude mapping (validated; field `"pump_amplitude"`). The next
+    /// tick rewrites the amplitude. Changing `base_scale` while running steps `s`, which
+    /// biases the rows for a while (FINDINGS §3.2): do it with the estimator gated.
+    pub fn set_pump_amplitude(&mut self, amplitude: PumpAmplitude) -> Result<(), ConfigError> {
+        amplitude.validate()?;
+        self.amplitude = amplitude;
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Commands the initial pump: the core's `initial_pump_hz` (inside the guard) and
+    /// the scale `s_base`, then pulses IO_UPDATE. Until it succeeds no pump is known and
+    /// the ticks' samples are flagged (NaN pump); a failed start is counted in
+    /// `dds_errors` and may be retried (or left to the next tick, which writes the
+    /// core's command). Returns the realised plan.
+    pub fn start<IO: IoUpdate + ?Sized>(
+        &mut self,
+        io: &mut IO,
+    ) -> Result<PumpPlan, ad9959::Error<DDS::Error>> {
+        let plan = self
+            .guard
+            .plan(self.est.initial_pump_hz(), self.chips.dds.sysclk_hz())
+            .ok_or(ad9959::Error::FrequencyOutOfRange)?;
+        let asf = self.amplitude.word_for(1.0);
+        self.apply(plan, asf, io)?;
+        Ok(plan)
+    }
+
+    /// The 500 Hz tick (DRDY interrupt body): read, step, command. Bounded, allocation-
+    /// free, never panics; see the module documentation for the order and fault rules.
+    pub fn tick<IO: IoUpdate + ?Sized>(&mut self, io: &mut IO) -> TickReport {
+        bump(&mut self.counters.ticks);
+        let (x, fx) = read_axis(
+            &mut self.chips.adc_x,
+            &self.cal_x,
+            self.lockin_beyond_um,
+            fault::ADC_X,
+            &mut self.counters,
+        );
+        let (y, fy) = read_axis(
+            &mut self.chips.adc_y,
+            &self.cal_y,
+            self.lockin_beyond_um,
+            fault::ADC_Y,
+            &mut self.counters,
+        );
+        let (accel, fa) = read_accel(
+            &mut self.chips.accel,
+            self.accel_beyond_mps2,
+            &mut self.counters,
+        );
+        let mut faults = fx | fy | fa;
+        if self.pump.is_none() {
+            faults |= fault::PUMP_UNKNOWN;
+        }
+        let sample = Sample {
+            lockin: lockin(x, y),
+            accel_mps2: accel,
+            pump_hz: self.pump_hz(),
+            pump_scale: self.pump_scale(),
+        };
+        let out = self.est.step(&sample);
+        faults |= self.command(&out, io);
+        TickReport {
+            out,
+            sample_ok: faults & fault::SAMPLE == 0,
+            pump_hz: self.pump_hz(),
+            pump_scale: self.pump_scale(),
+            faults,
+        }
+    }
+
+    /// The core's command through the guard to the DDS; returns fault bits.
+    fn command<IO: IoUpdate + ?Sized>(&mut self, out: &StepOutput, io: &mut IO) -> u8 {
+        let mut faults = 0;
+        let current = self.pump;
+        let requested = out.pump_hz_next;
+        let target = if requested.is_finite() {
+            requested
+        } else {
+            current.map_or(self.guard.midpoint(), |p| p.plan.pump_hz())
+        };
+        if !self.guard.contains(target) || !requested.is_finite() {
+            bump(&mut self.counters.guard_clamps);
+            faults |= fault::GUARD;
+        }
+        let m = out.pump_scale_next;
+        let asf = if m.is_finite() && m >= 0.0 {
+            self.amplitude.word_for(m)
+        } else {
+            // NaN would switch the pump off: keep the amplitude instead
+            bump(&mut self.counters.guard_clamps);
+            faults |= fault::GUARD;
+            current.map_or(self.amplitude.word_for(1.0), |p| p.asf)
+        };
+        let Some(plan) = self.guard.plan(target, self.chips.dds.sysclk_hz()) else {
+            // cannot happen for a validated guard; keep the pump and rewrite next time
+            bump(&mut self.counters.dds_errors);
+            self.dirty = true;
+            return faults | fault::DDS;
+        };
+        if self.apply(plan, asf, io).is_err() {
+            faults |= fault::DDS;
+        }
+        faults
+    }
+
+    /// Writes the words that differ from the ones in effect (all of them after an error
+    /// or a mapping change), pulses IO_UPDATE if anything was written, and records the
+    /// new pump in effect. On an error: no pulse, the old pump stays, counted.
+    fn apply<IO: IoUpdate + ?Sized>(
+        &mut self,
+        plan: PumpPlan,
+        asf: AmplitudeWord,
+        io: &mut IO,
+    ) -> Result<(), ad9959::Error<DDS::Error>> {
+        let all = self.dirty;
+        let freq = all
+            || self
+                .pump
+                .is_none_or(|p| p.plan.reference_ftw() != plan.reference_ftw());
+        let amp = all || self.pump.is_none_or(|p| p.asf != asf);
+        match write_pump(
+            &mut self.chips.dds,
+            freq.then_some(&plan),
+            amp.then_some(asf),
+        ) {
+            Ok(()) => {
+                if self.chips.dds.take_io_update().is_some() {
+                    io.pulse();
+                }
+                self.pump = Some(InEffect { plan, asf });
+                self.dirty = false;
+                Ok(())
+            }
+            Err(e) => {
+                bump(&mut self.counters.dds_errors);
+                self.dirty = true;
+                Err(e)
+            }
+        }
+    }
+
+    /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before
+    /// the first successful DDS write.
+    pub fn pump_hz(&self) -> f64 {
+        self.pump.map_or(f64::NAN, |p| p.plan.pump_hz())
+    }
+
+    /// Pump scale `s` in effect; NaN before the first successful DDS write.
+    pub fn pump_scale(&self) -> f32 {
+        self.pump
+            .map_or(f32::NAN, |p| self.amplitude.realised(p.asf))
+    }
+
+    /// The DDS plan in effect (pump and reference words).
+    pub fn pump_plan(&self) -> Option<PumpPlan> {
+        self.pump.map(|p| p.plan)
+    }
+
+    /// Firmware counters.
+    pub fn counters(&self) -> FwCounters {
+        self.counters
+    }
+
+    /// The estimator (θ̂, physical parameters, rate, health, its counters).
+    pub fn estimator(&self) -> &Estimator<f32> {
+        &self.est
+    }
+
+    /// The estimator, for commands between ticks (`command_pump_centre`, `set_dither`,
+    /// `set_retune`); the guard still applies to whatever it then commands.
+    pub fn estimator_mut(&mut self) -> &mut Estimator<f32> {
+        &mut self.est
+    }
+
+    /// The pump guard.
+    pub fn guard(&self) -> PumpGuard {
+        self.guard
+    }
+
+    /// The amplitude mapping.
+    pub fn pump_amplitude(&self) -> PumpAmplitude {
+        self.amplitude
+    }
+
+    /// Gives the chips and the estimator back.
+    pub fn release(self) -> (Chips<AX, AY, XL, DDS>, Estimator<f32>) {
+        (self.chips, self.est)
+    }
+}
