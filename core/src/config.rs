@@ -13,6 +13,21 @@ use core::fmt;
 /// ω0 of the paper's Table 2: γ = 3.8581e-5 ⇔ 150 °/s gives ω0 = 2.618/3.8581e-5 rad/s.
 pub const TABLE2_OMEGA0_RAD_S: f64 = 2.618 / 3.8581e-5;
 
+/// How the pump generator moves between two 500 Hz commands. The replica of the lock-in
+/// low-pass applied to the commanded pump must assume the same, or its output is off by
+/// half a sample on every change.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PumpProfile {
+    /// A linear sweep from one command to the next (DDS linear-sweep mode; the
+    /// simulator's default): the replica is FOH-exact.
+    #[default]
+    Linear,
+    /// Each command holds over the whole interval that ends at its sample (a DDS updated
+    /// once per sample, at the sample instant): the replica is ZOH-exact.
+    Staircase,
+}
+
 /// Pump-frequency dither (the excitation that makes all 14 parameters identifiable).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DitherConfig {
@@ -125,6 +140,8 @@ pub struct Config {
     pub lockin_lpf_hz: f64,
     /// Pump voltage amplitude V_A0 at which the nominal θ hold, V.
     pub pump_amp_ref_v: f64,
+    /// How the pump generator moves between commands (sets the replica's hold).
+    pub pump_profile: PumpProfile,
     /// Design (nominal) physical parameters, non-dimensional; the RLS runs on
     /// deviations from the θ they give, with columns scaled by |θ_nom|.
     pub nominal: Physical,
@@ -164,6 +181,7 @@ impl Config {
             lockin_lpf_order: 4,
             lockin_lpf_hz: 150.0,
             pump_amp_ref_v: 1.0,
+            pump_profile: PumpProfile::Linear,
             nominal,
             pump_centre_hz: 2.0 * libm::sqrt(TABLE2.wy2) * f0_hz,
             dither: DitherConfig {

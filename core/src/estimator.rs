@@ -734,12 +734,14 @@ impl<T: Real> Estimator<T> {
             ax: ReplicaChannel::at_rest(&co, acc[0]),
             ay: ReplicaChannel::at_rest(&co, acc[1]),
         });
-        let f_dom = rep.dom.update(&rep.co, dom);
+        // the commanded pump (frequency and scale) follows the generator's profile
+        let hold = self.cfg.pump_profile == crate::config::PumpProfile::Staircase;
+        let f_dom = rep.dom.update_with(&rep.co, dom, hold);
         let known = Known {
             om: T::from_f64(self.om_ref) + f_dom,
-            dom2: rep.dom2.update(&rep.co, dom2),
+            dom2: rep.dom2.update_with(&rep.co, dom2, hold),
             omd: rep.dom.derivative(&rep.co),
-            ds: rep.ds.update(&rep.co, ds),
+            ds: rep.ds.update_with(&rep.co, ds, hold),
             ax: rep.ax.update(&rep.co, acc[0]),
             ay: rep.ay.update(&rep.co, acc[1]),
         };

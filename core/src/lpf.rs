@@ -277,6 +277,18 @@ impl<T: Real> ReplicaChannel<T> {
         self.u_prev = u;
     }
 
+    /// Advances one sample with the new input `u` and returns the filtered value: FOH
+    /// (the input ramps linearly from the previous sample to `u`) or, with `hold`, ZOH
+    /// (the input is `u` over the whole interval, as a staircase that steps at the
+    /// previous sample instant).
+    #[inline]
+    pub fn update_with(&mut self, coeffs: &ReplicaCoeffs<T>, u: T, hold: bool) -> T {
+        if hold {
+            self.u_prev = u;
+        }
+        self.update(coeffs, u)
+    }
+
     /// Advances one sample with the new input `u` (FOH) and returns the filtered value.
     #[inline]
     pub fn update(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) -> T {

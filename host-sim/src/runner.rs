@@ -15,7 +15,7 @@ use serde_json::{Map, Value, json};
 
 use crate::lockin::LockinOut;
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
-use crate::scenario::{EventKind, EventSpec, PlantAt, Scenario};
+use crate::scenario::{EventKind, EventSpec, PlantAt, PumpProfileSpec, Scenario};
 use crate::trace::{Event, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow};
 
 /// Precision of the core instantiation.
@@ -57,6 +57,10 @@ pub fn core_config(sc: &Scenario) -> Config {
     c.f0_hz = sc.sim.f0_hz;
     c.lockin_lpf_order = sc.sim.lockin_lpf_order;
     c.lockin_lpf_hz = sc.sim.lockin_lpf_hz;
+    c.pump_profile = match sc.sim.pump_profile {
+        PumpProfileSpec::Linear => paragyro_core::config::PumpProfile::Linear,
+        PumpProfileSpec::Staircase => paragyro_core::config::PumpProfile::Staircase,
+    };
     // rows are weighted to unit noise; a noise-free run keeps the 1 pm/√Hz weighting
     c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 {
         sc.sim.noise_pm_rthz
@@ -286,17 +290,26 @@ pub fn closed_loop<T: Real>(
             drive: pa.theta_drive,
             sense: pa.theta_sense,
         };
-        let u0 = PlantInputs {
-            omega: pump_hz / (2.0 * f0),
-            s: s_k,
-            ax: pa.accel_x,
-            ay: pa.accel_y,
-        };
         let u1 = PlantInputs {
             omega: out.pump_hz_next / (2.0 * f0),
             s: sc.pump_scale_at(t_next) * out.pump_scale_next,
             ax: pa1.accel_x,
             ay: pa1.accel_y,
+        };
+        // the pump sweeps linearly to the command, or (staircase) the command holds
+        // over the whole interval
+        let u0 = match sc.sim.pump_profile {
+            PumpProfileSpec::Linear => PlantInputs {
+                omega: pump_hz / (2.0 * f0),
+                s: s_k,
+                ax: pa.accel_x,
+                ay: pa.accel_y,
+            },
+            PumpProfileSpec::Staircase => PlantInputs {
+                ax: pa.accel_x,
+                ay: pa.accel_y,
+                ..u1
+            },
         };
         sim.advance(&theta, &u0, &u1);
         pump_hz = out.pump_hz_next;

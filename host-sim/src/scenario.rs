@@ -312,6 +312,21 @@ pub struct SimSpec {
     pub lockin_lpf_hz: f64,
     /// Lock-in low-pass order (Butterworth).
     pub lockin_lpf_order: usize,
+    /// How the pump generator moves between two 500 Hz commands: `"linear"` (a DDS
+    /// linear sweep) or `"staircase"` (the new frequency and amplitude hold over the
+    /// whole interval, as a DDS updated once per sample at the sample instant).
+    pub pump_profile: PumpProfileSpec,
+}
+
+/// How the pump moves between commands (see [`SimSpec::pump_profile`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PumpProfileSpec {
+    /// Linear sweep from one command to the next.
+    #[default]
+    Linear,
+    /// Each command holds over the whole interval that ends at its sample.
+    Staircase,
 }
 
 impl Default for SimSpec {
@@ -322,6 +337,7 @@ impl Default for SimSpec {
             noise_pm_rthz: 1.0,
             lockin_lpf_hz: 150.0,
             lockin_lpf_order: 4,
+            pump_profile: PumpProfileSpec::Linear,
         }
     }
 }
