@@ -226,6 +226,17 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             precision,
             quiet,
         } => {
+            if scenario == "paper-raw" {
+                // not a scenario of the simulated gyro: the paper's own estimator
+                let v = paragyro_sim::paper_raw::write_paper_raw_report(&dir)
+                    .map_err(fail(EXIT_RUN))?;
+                let mut text = format!(
+                    "Wrote paper_raw_*.png and paper_raw_summary.json to {}\n\n",
+                    dir.display()
+                );
+                text.push_str(v["table_md"].as_str().unwrap_or_default());
+                return say(out, &text);
+            }
             let sc = load(&scenario)?;
             let opts = RunOptions {
                 precision: precision.into(),
