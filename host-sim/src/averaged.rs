@@ -1691,15 +1691,14 @@ pub(crate) mod plot {
         for c in &p.curves {
             let thin = c.color.stroke_width(1);
             let legend_style = c.color.stroke_width(c.width.max(1));
-            let brush: &[(f64, f64)] = match c.width {
-                0 | 1 => &[(0.0, 0.0)],
-                2 => &[(0.0, 0.0), (dx, 0.0), (0.0, dy)],
-                _ => &[(0.0, 0.0), (dx, 0.0), (0.0, dy), (dx, dy)],
-            };
+            let brush = crate::report::thick_brush(c.width);
             let mut labelled = false;
             for &(ox, oy) in brush {
-                let shifted: Vec<(f64, f64)> =
-                    c.pts.iter().map(|&(a, b)| (a + ox, b + oy)).collect();
+                let shifted: Vec<(f64, f64)> = c
+                    .pts
+                    .iter()
+                    .map(|&(a, b)| (a + ox * dx, b + oy * dy))
+                    .collect();
                 for seg in clip(&shifted, p.x, p.y) {
                     let anno = if c.dashed {
                         chart.draw_series(DashedLineSeries::new(seg, 7, 5, thin))?

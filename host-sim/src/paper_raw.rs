@@ -1585,22 +1585,26 @@ const LAMBDA_COLORS: [RGBColor; 4] = [
     RGBColor(255, 127, 14),
     RGBColor(148, 103, 189),
 ];
-const TAB14: [RGBColor; 14] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-    RGBColor(0, 0, 128),
-    RGBColor(128, 0, 0),
-    RGBColor(0, 100, 0),
-    RGBColor(0, 0, 0),
-];
+/// 14 distinct colours: the shared tab10 palette and four dark ones.
+const TAB14: [RGBColor; 14] = {
+    let t = crate::report::TAB10;
+    [
+        t[0],
+        t[1],
+        t[2],
+        t[3],
+        t[4],
+        t[5],
+        t[6],
+        t[7],
+        t[8],
+        t[9],
+        RGBColor(0, 0, 128),
+        RGBColor(128, 0, 0),
+        RGBColor(0, 100, 0),
+        RGBColor(0, 0, 0),
+    ]
+};
 
 /// One polyline.
 struct Series {

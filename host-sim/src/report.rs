@@ -226,7 +226,19 @@ fn figure<'a>(path: &'a Path, title: &str) -> Result<(Area<'a>, Area<'a>)> {
     Ok((root, body))
 }
 
-const TAB10: [RGBColor; 10] = [
+/// Offsets, in pixels, at which a line of `width` pixels is drawn as several 1-px lines
+/// (plotters draws thick lines with unbounded mitred corners, which turn every sharp turn
+/// into a spike). Scale them by the data size of one pixel.
+pub(crate) fn thick_brush(width: u32) -> &'static [(f64, f64)] {
+    match width {
+        0 | 1 => &[(0.0, 0.0)],
+        2 => &[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)],
+        _ => &[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)],
+    }
+}
+
+/// The plots' palette (matplotlib's tab10), shared by every plotting module.
+pub(crate) const TAB10: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -440,15 +452,14 @@ fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
     for line in &p.lines {
         let thin = line.color.stroke_width(1);
         let legend_style = line.color.stroke_width(line.width.max(1));
-        let brush: &[(f64, f64)] = match line.width {
-            0 | 1 => &[(0.0, 0.0)],
-            2 => &[(0.0, 0.0), (dx, 0.0), (0.0, dy)],
-            _ => &[(0.0, 0.0), (dx, 0.0), (0.0, dy), (dx, dy)],
-        };
+        let brush = thick_brush(line.width);
         let mut labelled = false;
         for &(ox, oy) in brush {
-            let shifted: Vec<(f64, f64)> =
-                line.pts.iter().map(|&(t, v)| (t + ox, v + oy)).collect();
+            let shifted: Vec<(f64, f64)> = line
+                .pts
+                .iter()
+                .map(|&(t, v)| (t + ox * dx, v + oy * dy))
+                .collect();
             for seg in segments(&shifted, p.y) {
                 let anno = if line.dashed {
                     chart.draw_series(DashedLineSeries::new(seg, 8, 5, thin))?
