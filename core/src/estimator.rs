@@ -1041,6 +1041,30 @@ mod tests {
     }
 
     #[test]
+    fn amplitude_phase_front_end_is_converted() {
+        // A = |A|·e^{iφ}: (2, 0.3 rad) → (2cos0.3, 2sin0.3); DC levels pass through
+        let l = Lockin::<f64>::from_polar(
+            0.02,
+            [2.0, 0.1, 0.003],
+            [0.3, -1.0, 2.5],
+            -0.01,
+            [1.5, 0.0, 0.001],
+            [-0.7, 0.0, 3.1],
+        );
+        let close = |z: Cplx<f64>, a: f64, ph: f64| {
+            (z.re - a * ph.cos()).abs() < 1e-15 && (z.im - a * ph.sin()).abs() < 1e-15
+        };
+        assert!(
+            close(l.x_um[0], 2.0, 0.3)
+                && close(l.x_um[1], 0.1, -1.0)
+                && close(l.x_um[2], 0.003, 2.5)
+        );
+        assert!(close(l.y_um[0], 1.5, -0.7) && close(l.y_um[2], 0.001, 3.1));
+        assert_eq!((l.x0_um, l.y0_um), (0.02, -0.01));
+        assert!((l.x_um[0].abs() - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
     fn config_errors_name_the_field() {
         let mut c = Config::table2();
         c.rls.forgetting = 1.5;
