@@ -198,6 +198,10 @@ pub struct ReplicaCoeffs<T> {
     /// C·A: the output's time derivative is C·A·x + C·B·u (C·B = 0 for order ≥ 2).
     ca: [T; MAX_ORDER],
     cb: T,
+    /// Steady state of a unit constant input (the filter is linear: the rest state at
+    /// input u is u times this), computed at design time so that starting a channel
+    /// costs O(n) on the tick path.
+    rest_unit: [T; MAX_ORDER],
 }
 
 impl<T: Real> ReplicaCoeffs<T> {
@@ -214,6 +218,7 @@ impl<T: Real> ReplicaCoeffs<T> {
             c: [T::ZERO; MAX_ORDER],
             ca: [T::ZERO; MAX_ORDER],
             cb: T::ZERO,
+            rest_unit: [T::ZERO; MAX_ORDER],
         };
         let mut cb = 0.0;
         for i in 0..d.n {
@@ -231,6 +236,23 @@ impl<T: Real> ReplicaCoeffs<T> {
             cb += sys.c[i] * sys.b[i];
         }
         r.cb = T::from_f64(cb);
+        // rest state for u = 1: iterate x = Φx + Γ0 (|eig Φ| < 1, converges
+        // geometrically) in f64 at design time
+        let mut x = [0.0f64; MAX_ORDER];
+        for _ in 0..2000 {
+            let mut nx = [0.0f64; MAX_ORDER];
+            for i in 0..d.n {
+                let mut acc = d.g0[i];
+                for j in 0..d.n {
+                    acc += d.phi[i][j] * x[j];
+                }
+                nx[i] = acc;
+            }
+            x = nx;
+        }
+        for i in 0..d.n {
+            r.rest_unit[i] = T::from_f64(x[i]);
+        }
         r
     }
 }
@@ -253,27 +275,12 @@ impl<T: Real> ReplicaChannel<T> {
         ch
     }
 
-    /// Sets the state to the steady state of a constant input `u`.
+    /// Sets the state to the steady state of a constant input `u` (O(n): the design
+    /// holds the rest state of a unit input).
     pub fn settle(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) {
-        // In the scaled cascade, the steady state has every section output q = u and
-        // every derivative state r = 0; the q states are the ones with a non-zero
-        // diagonal coupling to the previous output, so find them from Φ's fixed point:
-        // iterate x = Φx + Γ0u, which converges geometrically (|eig Φ| < 1). At design
-        // time a few hundred iterations are negligible.
-        let mut x = [T::ZERO; MAX_ORDER];
-        let n = coeffs.n;
-        for _ in 0..400 {
-            let mut nx = [T::ZERO; MAX_ORDER];
-            for i in 0..n {
-                let mut acc = coeffs.g0[i] * u;
-                for j in 0..n {
-                    acc += coeffs.phi[i][j] * x[j];
-                }
-                nx[i] = acc;
-            }
-            x = nx;
+        for (x, r) in self.x.iter_mut().zip(coeffs.rest_unit.iter()) {
+            *x = *r * u;
         }
-        self.x = x;
         self.u_prev = u;
     }
 
