@@ -223,7 +223,6 @@ pub struct StepOutput {
 
 #[derive(Clone, Copy, Debug)]
 struct Replicas<T> {
-    co: ReplicaCoeffs<T>,
     dom: ReplicaChannel<T>,
     dom2: ReplicaChannel<T>,
     ds: ReplicaChannel<T>,
@@ -725,25 +724,25 @@ impl<T: Real> Estimator<T> {
         let dom = dev;
         let dom2 = dev * (self.two_om_ref + dev);
         let ds = pscale - T::ONE;
-        let co = self.rep_co;
+        // one set of coefficients, borrowed (not copied) every tick
+        let co = &self.rep_co;
         let rep = self.rep.get_or_insert_with(|| Replicas {
-            co,
-            dom: ReplicaChannel::at_rest(&co, dom),
-            dom2: ReplicaChannel::at_rest(&co, dom2),
-            ds: ReplicaChannel::at_rest(&co, ds),
-            ax: ReplicaChannel::at_rest(&co, acc[0]),
-            ay: ReplicaChannel::at_rest(&co, acc[1]),
+            dom: ReplicaChannel::at_rest(co, dom),
+            dom2: ReplicaChannel::at_rest(co, dom2),
+            ds: ReplicaChannel::at_rest(co, ds),
+            ax: ReplicaChannel::at_rest(co, acc[0]),
+            ay: ReplicaChannel::at_rest(co, acc[1]),
         });
         // the commanded pump (frequency and scale) follows the generator's profile
         let hold = self.cfg.pump_profile == crate::config::PumpProfile::Staircase;
-        let f_dom = rep.dom.update_with(&rep.co, dom, hold);
+        let f_dom = rep.dom.update_with(co, dom, hold);
         let known = Known {
             om: T::from_f64(self.om_ref) + f_dom,
-            dom2: rep.dom2.update_with(&rep.co, dom2, hold),
-            omd: rep.dom.derivative(&rep.co),
-            ds: rep.ds.update_with(&rep.co, ds, hold),
-            ax: rep.ax.update(&rep.co, acc[0]),
-            ay: rep.ay.update(&rep.co, acc[1]),
+            dom2: rep.dom2.update_with(co, dom2, hold),
+            omd: rep.dom.derivative(co),
+            ds: rep.ds.update_with(co, ds, hold),
+            ax: rep.ax.update(co, acc[0]),
+            ay: rep.ay.update(co, acc[1]),
         };
         let exc_var = self.exc.push(f_dom);
         self.last_known = known;
