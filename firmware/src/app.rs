@@ -344,6 +344,8 @@ pub struct App<AX, AY, XL, DDS> {
     /// The DDS buffers may differ from the words in effect: rewrite all before a pulse.
     dirty: bool,
     counters: FwCounters,
+    /// The sample given to the core at the last tick (for the capture mode).
+    last: Sample<f32>,
 }
 
 /// A value beyond `full_scale` (twice it, or `f32::MAX` if that overflows).
@@ -509,6 +511,12 @@ where
             pump: None,
             dirty: true,
             counters: FwCounters::default(),
+            last: Sample {
+                lockin: lockin([f32::NAN; LOCKIN_CHANNELS], [f32::NAN; LOCKIN_CHANNELS]),
+                accel_mps2: [f32::NAN; 2],
+                pump_hz: f64::NAN,
+                pump_scale: f32::NAN,
+            },
         })
     }
 
@@ -543,6 +551,29 @@ where
     /// The 500 Hz tick (DRDY interrupt body): read, step, command. Bounded, allocation-
     /// free, never panics; see the module documentation for the order and fault rules.
     pub fn tick<IO: IoUpdate + ?Sized>(&mut self, io: &mut IO) -> TickReport {
+        self.tick_inner(io, None)
+    }
+
+    /// [`App::tick`] for an open-loop replay of a record: the sample carries the pump
+    /// the record says was in effect (`pump_hz`, `pump_scale`) instead of the DDS's,
+    /// because the recorded lock-in data were produced by that pump. Everything else is
+    /// the same tick: frames, core step, guard, DDS plan and writes (the realised pump
+    /// the DDS would run is then in [`TickReport::pump_hz`] and in the DDS, to be
+    /// compared with the record's next pump).
+    pub fn tick_with_pump<IO: IoUpdate + ?Sized>(
+        &mut self,
+        io: &mut IO,
+        pump_hz: f64,
+        pump_scale: f32,
+    ) -> TickReport {
+        self.tick_inner(io, Some((pump_hz, pump_scale)))
+    }
+
+    fn tick_inner<IO: IoUpdate + ?Sized>(
+        &mut self,
+        io: &mut IO,
+        known_pump: Option<(f64, f32)>,
+    ) -> TickReport {
         bump(&mut self.counters.ticks);
         let (x, fx) = read_axis(
             &mut self.chips.adc_x,
@@ -564,16 +595,19 @@ where
             &mut self.counters,
         );
         let mut faults = fx | fy | fa;
-        if self.pump.is_none() {
+        let (pump_hz, pump_scale) =
+            known_pump.unwrap_or_else(|| (self.pump_hz(), self.pump_scale()));
+        if known_pump.is_none() && self.pump.is_none() {
             faults |= fault::PUMP_UNKNOWN;
         }
         let sample = Sample {
             lockin: lockin(x, y),
             accel_mps2: accel,
-            pump_hz: self.pump_hz(),
-            pump_scale: self.pump_scale(),
+            pump_hz,
+            pump_scale,
         };
         let out = self.est.step(&sample);
+        self.last = sample;
         faults |= self.command(&out, io);
         TickReport {
             out,
@@ -670,6 +704,14 @@ where
     /// The DDS plan in effect (pump and reference words).
     pub fn pump_plan(&self) -> Option<PumpPlan> {
         self.pump.map(|p| p.plan)
+    }
+
+    /// The sample the core was given at the last tick: lock-in values in µm after the
+    /// calibration (NaN for a lost frame, beyond full scale where saturated), the
+    /// accelerations, the pump in effect. What the capture mode streams (one
+    /// `paragyro-record 1` row per tick); NaN before the first tick.
+    pub fn last_sample(&self) -> &Sample<f32> {
+        &self.last
     }
 
     /// Firmware counters.

@@ -27,6 +27,8 @@
 pub mod app;
 pub mod drivers;
 pub mod replay;
+pub mod run;
+pub mod table;
 
 pub use drivers::ad9959::Ad9959;
 pub use drivers::ads131m08::Ads131m08;

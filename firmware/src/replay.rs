@@ -37,6 +37,7 @@ use crate::drivers::ads131m08::{
     self, CHANNELS, FRAME_BYTES, Frame, LOCKIN_CHANNELS, LockinCalibration, RawCode, opcode,
 };
 use crate::drivers::adxl355::{self, Range, Register as XlReg};
+use crate::table::ReplayTable;
 
 /// The error of a replay device's injected SPI fault.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -190,11 +191,22 @@ enum Pending {
     Word(u16),
 }
 
+/// Where a [`ReplayAdc`]'s samples come from.
+#[derive(Clone, Debug)]
+enum AdcData<'a> {
+    /// Values in µm, encoded through the inverse of `cal`.
+    Um {
+        samples: &'a [[f32; LOCKIN_CHANNELS]],
+        cal: LockinCalibration,
+    },
+    /// Codes of one axis of a replay table.
+    Table { table: ReplayTable<'a>, axis: usize },
+}
+
 /// An ADS131M08 replaying lock-in values (µm) of one axis, one sample per data frame.
 #[derive(Clone, Debug)]
 pub struct ReplayAdc<'a> {
-    samples: &'a [[f32; LOCKIN_CHANNELS]],
-    cal: LockinCalibration,
+    samples: AdcData<'a>,
     looping: bool,
     faults: AdcFaults,
     next: usize,
@@ -212,9 +224,18 @@ impl<'a> ReplayAdc<'a> {
     /// Serves `samples` (µm, lock-in channel order) through the inverse of `cal` (use the
     /// calibration the firmware decodes with).
     pub const fn new(samples: &'a [[f32; LOCKIN_CHANNELS]], cal: LockinCalibration) -> Self {
+        Self::with_data(AdcData::Um { samples, cal })
+    }
+
+    /// Serves the lock-in codes of one axis (0 drive, 1 sense) of a replay table as they
+    /// are (the codes the simulator's record was quantised to).
+    pub const fn from_table(table: ReplayTable<'a>, axis: usize) -> Self {
+        Self::with_data(AdcData::Table { table, axis })
+    }
+
+    const fn with_data(samples: AdcData<'a>) -> Self {
         Self {
             samples,
-            cal,
             looping: false,
             faults: AdcFaults {
                 crc: Span::NEVER,
@@ -293,16 +314,25 @@ impl<'a> ReplayAdc<'a> {
 
     /// Index into the table for sample `i` (`None` after the end, unless looping).
     fn table_index(&self, i: usize) -> Option<usize> {
+        let len = match &self.samples {
+            AdcData::Um { samples, .. } => samples.len(),
+            AdcData::Table { table, .. } => table.len(),
+        };
         if self.looping {
-            i.checked_rem(self.samples.len())
+            i.checked_rem(len)
         } else {
-            (i < self.samples.len()).then_some(i)
+            (i < len).then_some(i)
         }
     }
 
     fn lockin_codes(&self, i: usize) -> Option<[RawCode; LOCKIN_CHANNELS]> {
-        let um = self.samples.get(self.table_index(i)?)?;
-        Some(encode_lockin(&self.cal, um))
+        let j = self.table_index(i)?;
+        match &self.samples {
+            AdcData::Um { samples, cal } => Some(encode_lockin(cal, samples.get(j)?)),
+            AdcData::Table { table, axis } => {
+                Some(table.adc_codes(j, *axis)?.map(RawCode::saturating_new))
+            }
+        }
     }
 
     /// The eight codes of sample `i` with the faults applied (`None` after the end).
@@ -543,10 +573,19 @@ fn xl_reset_registers() -> [u8; XL_REGS] {
     r
 }
 
+/// Where a [`ReplayAccel`]'s samples come from.
+#[derive(Clone, Debug)]
+enum AccelData<'a> {
+    /// X, Y in m/s², encoded for the range written to RANGE.
+    Mps2(&'a [[f32; 2]]),
+    /// X, Y codes of a replay table.
+    Table(ReplayTable<'a>),
+}
+
 /// An ADXL355 replaying X, Y accelerations (m/s²), one sample per STATUS..ZDATA1 burst.
 #[derive(Clone, Debug)]
 pub struct ReplayAccel<'a> {
-    samples: &'a [[f32; 2]],
+    samples: AccelData<'a>,
     z_mps2: f32,
     looping: bool,
     missing: Span,
@@ -568,6 +607,16 @@ impl<'a> ReplayAccel<'a> {
     /// Serves `samples` (X along the drive axis, Y along the sense axis, m/s²) with
     /// Z = standard gravity (the board lying flat).
     pub fn new(samples: &'a [[f32; 2]]) -> Self {
+        Self::with_data(AccelData::Mps2(samples))
+    }
+
+    /// Serves the X, Y codes of a replay table as they are (they are for the table's
+    /// range: the firmware must set that range), Z = standard gravity.
+    pub fn from_table(table: ReplayTable<'a>) -> Self {
+        Self::with_data(AccelData::Table(table))
+    }
+
+    fn with_data(samples: AccelData<'a>) -> Self {
         Self {
             samples,
             z_mps2: adxl355::STANDARD_GRAVITY_MPS2,
@@ -646,16 +695,26 @@ impl<'a> ReplayAccel<'a> {
 
     /// Put sample `i` into STATUS..ZDATA1 (STATUS 0, no data, after the end).
     fn load(&mut self, i: usize) {
-        let index = if self.looping {
-            i.checked_rem(self.samples.len())
-        } else {
-            (i < self.samples.len()).then_some(i)
+        let len = match &self.samples {
+            AccelData::Mps2(s) => s.len(),
+            AccelData::Table(t) => t.len(),
         };
+        let index = if self.looping {
+            i.checked_rem(len)
+        } else {
+            (i < len).then_some(i)
+        };
+        let range = self.range();
+        let codes = index.and_then(|j| match &self.samples {
+            AccelData::Mps2(s) => s
+                .get(j)
+                .map(|&[x, y]| [encode_accel(x, range), encode_accel(y, range)]),
+            AccelData::Table(t) => t.accel_codes(j),
+        });
         let mut block = [0u8; 13];
-        if let Some(&[x, y]) = index.and_then(|j| self.samples.get(j)) {
-            let range = self.range();
-            let [x3, x2, x1] = accel_bytes(encode_accel(x, range));
-            let [y3, y2, y1] = accel_bytes(encode_accel(y, range));
+        if let Some([x, y]) = codes {
+            let [x3, x2, x1] = accel_bytes(x);
+            let [y3, y2, y1] = accel_bytes(y);
             let [z3, z2, z1] = accel_bytes(encode_accel(self.z_mps2, range));
             // STATUS (DATA_RDY), FIFO_ENTRIES, TEMP2, TEMP1 (≈ 25 °C), X, Y, Z
             block = [0x01, 0, 0x07, 0x08, x3, x2, x1, y3, y2, y1, z3, z2, z1];

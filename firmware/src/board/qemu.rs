@@ -1,0 +1,202 @@
+//! The QEMU board (`netduinoplus2`, the STM32F405's core and memory map, no SPI chips).
+//!
+//! The chips are replay devices serving the firmware's replay table
+//! (`firmware/replay/fw-drift-retune.bin`: ≥ 10 s of the `fw-drift-retune` scenario,
+//! simulated on the host by `paragyro-fw-replay table`), and the AD9959 is a capture of
+//! what the firmware writes. The run ([`paragyro_firmware::run`], the same library code
+//! the host test runs):
+//!
+//! 1. every chip is initialised by its real driver over its replay device, the [`App`] is
+//!    built from the table's core configuration and the pump started;
+//! 2. each tick gives the core the table's control events for that tick (dither off at
+//!    6 s, as the simulator did), then runs [`App::tick_with_pump`] with the record's pump
+//!    (open-loop replay: the recorded frames were produced by that pump), timed with
+//!    SysTick (exact instruction counts under `-icount shift=0`);
+//! 3. after each tick the per-tick outputs go into a digest, the DDS's realised pump is
+//!    compared with the record's next pump, and every 50 ticks a telemetry line is
+//!    printed (10 Hz);
+//! 4. the verdict: every sample valid, ω̂y² within 10 % of the drift of the true ωy²,
+//!    a retune that took the pump within 10 % of the expected move of the new sense
+//!    resonance, the DDS on the record's pump within the word quantisation. Exit 0 only
+//!    then; 1 on a failed check, a panic or a HardFault (main.rs); the runner's timeout
+//!    turns a hang into 124.
+//!
+//! Features: `tick-stream` prints every tick's outputs (`TICK` lines, for the host
+//! comparison test), `capture` every tick's inputs (`CAP` lines, the capture mode).
+//!
+//! [`App`]: paragyro_firmware::app::App
+//! [`App::tick_with_pump`]: paragyro_firmware::app::App::tick_with_pump
+
+use cortex_m::peripheral::{SYST, syst::SystClkSource};
+use cortex_m_rt::{entry, exception};
+use cortex_m_semihosting::debug;
+use defmt_semihosting as _;
+use embedded_hal::delay::DelayNs;
+use paragyro_firmware::drivers::ad9959::DEFAULT_SYSCLK_HZ;
+use paragyro_firmware::replay::DdsCapture;
+use paragyro_firmware::run::{self, ReplayCheck};
+use paragyro_firmware::table::{ReplayTable, cfg};
+
+/// The replay table (see the module documentation).
+static TABLE: &[u8] = include_bytes!("../../replay/fw-drift-retune.bin");
+
+/// SysTick runs at the core clock (168 MHz on netduinoplus2); with `-icount shift=0`
+/// QEMU advances 1 ns per instruction, so instructions = ticks · 1e9 / 168e6.
+const SYSTICK_HZ: u64 = 168_000_000;
+
+/// The replay chips answer at once: no wait is needed (the real board waits).
+struct NoWait;
+
+impl DelayNs for NoWait {
+    fn delay_ns(&mut self, _ns: u32) {}
+}
+
+#[entry]
+fn main() -> ! {
+    let ok = match cortex_m::Peripherals::take() {
+        Some(mut cp) => replay(&mut cp.SYST),
+        None => false,
+    };
+    defmt::info!("{}", if ok { "PASS" } else { "FAIL" });
+    exit(ok)
+}
+
+fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+fn replay(syst: &mut SYST) -> bool {
+    let table = match ReplayTable::parse(TABLE) {
+        Ok(t) => t,
+        Err(e) => {
+            defmt::error!("replay table: {}", e);
+            return false;
+        }
+    };
+    let fs_hz = table.cfg_slot(cfg::FS_HZ);
+    defmt::info!(
+        "paragyro-firmware, qemu board: replaying {=usize} samples ({=f64} s) of fw-drift-retune, table FNV-1a 64 {=u64:x}",
+        table.len(),
+        table.len() as f64 / fs_hz,
+        table.hash()
+    );
+    let dds = DdsCapture::new(DEFAULT_SYSCLK_HZ);
+    let mut io = dds.io_update();
+    let mut app = match run::replay_app(table, &dds, &mut io, &mut NoWait) {
+        Ok(a) => a,
+        Err(e) => {
+            defmt::error!("board setup failed: {}", defmt::Debug2Format(&e));
+            return false;
+        }
+    };
+    #[cfg(feature = "capture")]
+    super::capture_header(&table.config());
+
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+    let mut check = ReplayCheck::new(&table);
+    let mut total: u64 = 0;
+    let mut worst: u32 = 0;
+    let mut worst_k: usize = 0;
+    for k in 0..table.len() {
+        run::apply_controls(&table, k, &mut app);
+        let Some((pump_hz, pump_scale)) = table.pump(k) else {
+            return false;
+        };
+        let t0 = SYST::get_current();
+        let r = app.tick_with_pump(&mut io, pump_hz, pump_scale);
+        let t1 = SYST::get_current();
+        let dt = t0.wrapping_sub(t1) & 0x00FF_FFFF;
+        total += u64::from(dt);
+        if dt > worst {
+            worst = dt;
+            worst_k = k;
+        }
+        check.observe(&table, k, &app, &r, dds.active_pump_hz());
+        #[cfg(feature = "tick-stream")]
+        {
+            let (t1, t2) = app.estimator().theta();
+            defmt::info!(
+                "TICK k={=usize} cmd={=f64} pump={=f64} scale={=f64} h={=u32} ev={=u8} f={=u8} d={=u64:x} t1={} t2={}",
+                k,
+                r.out.pump_hz_next,
+                r.pump_hz,
+                r.out.pump_scale_next,
+                r.out.health.bits(),
+                r.out.events,
+                r.faults,
+                check.digest(),
+                t1,
+                t2
+            );
+        }
+        #[cfg(feature = "capture")]
+        super::capture_tick(k as u32, &app);
+        if (k as u32).is_multiple_of(super::TELEMETRY_EVERY) {
+            super::telemetry(k as u32, fs_hz, &app, &r);
+        }
+    }
+    let n = table.len().max(1) as u64;
+    let mean = total * 1_000_000_000 / SYSTICK_HZ / n;
+    let max = u64::from(worst) * 1_000_000_000 / SYSTICK_HZ;
+    defmt::info!(
+        "App::tick_with_pump: {=usize} ticks, {=u64} instructions per tick (mean, SysTick under -icount shift=0, ±6), {=u64} (max, at tick {=usize})",
+        table.len(),
+        mean,
+        max,
+        worst_k
+    );
+    let v = check.verdict(&table, &app, dds.active_pump_hz());
+    defmt::info!("core counters: {}", app.estimator().counters());
+    defmt::info!("firmware counters: {}", app.counters());
+    defmt::info!(
+        "wy2 {=f64} (true {=f64}, tolerance {=f64}): {=bool}",
+        v.wy2_est,
+        v.wy2_true,
+        v.wy2_tol,
+        v.converged()
+    );
+    defmt::info!(
+        "retune: {=u32} done, pump at the end {=f64} Hz (new sense resonance {=f64} Hz, tolerance {=f64} Hz): {=bool}",
+        v.retunes,
+        v.pump_end_hz,
+        v.resonance_end_hz,
+        v.pump_tol_hz,
+        v.retuned()
+    );
+    defmt::info!(
+        "DDS against the record's next pump: max {=f64} Hz (after the dither: {=f64} Hz), bound {=f64} Hz: {=bool}",
+        v.dds_vs_record_max_hz,
+        v.dds_vs_record_steady_max_hz,
+        0.5 * run::pump_step_hz() + run::DDS_F32_MARGIN_HZ,
+        v.dds_tracks_record()
+    );
+    defmt::info!(
+        "bad ticks {=u32}, rate {=f64} dps, output digest {=u64:016x}",
+        v.bad_ticks,
+        v.rate_dps,
+        v.digest
+    );
+    v.pass()
+}
+
+#[exception]
+unsafe fn HardFault(_ef: &cortex_m_rt::ExceptionFrame) -> ! {
+    debug::exit(debug::EXIT_FAILURE);
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    exit(false)
+}

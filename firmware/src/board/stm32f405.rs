@@ -1,0 +1,232 @@
+//! The real board: an STM32F405RG at 168 MHz (8 MHz HSE) through `stm32f4xx-hal`.
+//!
+//! | chip | bus | pins |
+//! |---|---|---|
+//! | ADS131M08, drive axis (X0, A1..A3) | SPI1, mode 1, 8 MHz | SCK PA5, MISO PA6, MOSI PA7, CS PA4 |
+//! | ADS131M08, sense axis (Y0, B1..B3) | SPI1 (shared) | CS PC4 |
+//! | both ADCs' DRDY (one CLKIN, simultaneous conversions) | | PB0 (input, active low) |
+//! | ADXL355 | SPI2, mode 0, 5 MHz | SCK PB13, MISO PB14, MOSI PB15, CS PB12 |
+//! | AD9959 (25 MHz reference, PLL ×20 = 500 MHz) | SPI3, mode 0, 10 MHz | SCK PC10, SDIO_2 → MISO PC11, SDIO_0 ← MOSI PC12, CS PA15 |
+//! | AD9959 IO_UPDATE | | PB1 (output) |
+//!
+//! The pin map is this firmware's; a PCB that differs changes this table and the code
+//! below, nothing else. The chips are initialised by their drivers, then the main loop
+//! waits for DRDY (polled: the tick is the only work, so no interrupt is needed; a DRDY
+//! missing for 4 ms is counted and the tick runs anyway, so the ADC's "not ready" reaches
+//! the core, which flags and holds) and runs [`App::tick`]. The cycles of every tick are
+//! counted with DWT CYCCNT (real cycles here, unlike QEMU) and reported with the 10 Hz
+//! telemetry. With the `capture` feature every tick's inputs are streamed as `CAP` lines
+//! (`paragyro-fw-replay capture` turns the log into a record).
+//!
+//! Flash and run (defmt over RTT):
+//! `probe-rs run --chip STM32F405RGTx target/thumbv7em-none-eabihf/release/paragyro-firmware`
+//! (or `cargo run -p paragyro-firmware --target thumbv7em-none-eabihf --release
+//! --no-default-features --features stm32f405` with `PARAGYRO_RUNNER=probe-rs`, see
+//! docs/firmware.md).
+//!
+//! **Calibration.** [`CAL_X_UM_PER_VOLT`] and [`CAL_Y_UM_PER_VOLT`] are the analog
+//! front end's design scale (the values the replay table uses); a built board replaces
+//! them by its bench calibration. Compile-checked in CI only: no board has run it yet.
+//!
+//! [`App::tick`]: paragyro_firmware::app::App::tick
+
+use core::cell::RefCell;
+
+use cortex_m::peripheral::DWT;
+use cortex_m_rt::entry;
+use defmt_rtt as _;
+use embedded_hal::delay::DelayNs;
+use embedded_hal_bus::spi::{ExclusiveDevice, RefCellDevice};
+use panic_probe as _;
+use paragyro_core::Config;
+use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
+use paragyro_firmware::drivers::ad9959::Ad9959;
+use paragyro_firmware::drivers::ads131m08::{self, Ads131m08};
+use paragyro_firmware::drivers::adxl355::{Adxl355, HighPass, Odr, Range};
+use paragyro_firmware::run::calibration;
+use stm32f4xx_hal::pac;
+use stm32f4xx_hal::prelude::*;
+use stm32f4xx_hal::rcc::Config as RccConfig;
+use stm32f4xx_hal::spi::{Mode, Phase, Polarity, Spi};
+
+/// Core clock, Hz.
+const SYSCLK_HZ: u32 = 168_000_000;
+/// The AD9959's reference clock and PLL multiplier (SYSCLK 500 MHz).
+const DDS_REF_HZ: f64 = 25e6;
+const DDS_PLL: u8 = 20;
+/// Drive-axis lock-in scale, µm per volt at the ADC input (design value).
+pub const CAL_X_UM_PER_VOLT: f32 = 8.0;
+/// Sense-axis lock-in scale, µm per volt at the ADC input (design value).
+pub const CAL_Y_UM_PER_VOLT: f32 = 4.0;
+/// Half-width of the pump guard around the configured centre, Hz.
+const GUARD_HALF_WIDTH_HZ: f64 = 400.0;
+/// A DRDY missing for this many cycles (4 ms, two periods) is counted as a timeout.
+const DRDY_TIMEOUT_CYCLES: u32 = SYSCLK_HZ / 250;
+
+/// Busy-wait delay on the core clock (driver init only).
+struct CycleDelay;
+
+impl DelayNs for CycleDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        let cycles = (u64::from(ns) * u64::from(SYSCLK_HZ) / 1_000_000_000) as u32;
+        cortex_m::asm::delay(cycles.max(1));
+    }
+}
+
+/// Stops with a defmt error (probe-rs shows it; the debugger halts at the breakpoint).
+fn fail(what: &str) -> ! {
+    defmt::error!("{=str}", what);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(dp) = pac::Peripherals::take() else {
+        fail("device peripherals taken twice")
+    };
+    let Some(mut cp) = cortex_m::Peripherals::take() else {
+        fail("core peripherals taken twice")
+    };
+    let mut rcc = dp.RCC.freeze(
+        RccConfig::hse(8.MHz())
+            .sysclk(SYSCLK_HZ.Hz())
+            .pclk1(42.MHz())
+            .pclk2(84.MHz()),
+    );
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    let gpioc = dp.GPIOC.split(&mut rcc);
+
+    let mode0 = Mode {
+        polarity: Polarity::IdleLow,
+        phase: Phase::CaptureOnFirstTransition,
+    };
+    let mode1 = Mode {
+        polarity: Polarity::IdleLow,
+        phase: Phase::CaptureOnSecondTransition,
+    };
+    let spi1 = Spi::new(
+        dp.SPI1,
+        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        mode1,
+        8.MHz(),
+        &mut rcc,
+    );
+    let spi2 = Spi::new(
+        dp.SPI2,
+        (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
+        mode0,
+        5.MHz(),
+        &mut rcc,
+    );
+    let spi3 = Spi::new(
+        dp.SPI3,
+        (Some(gpioc.pc10), Some(gpioc.pc11), Some(gpioc.pc12)),
+        mode0,
+        10.MHz(),
+        &mut rcc,
+    );
+    let adc_bus = RefCell::new(spi1);
+    // GPIO writes are infallible on the STM32F4 (the error type is `Infallible`)
+    let Ok(adc_x_dev) = RefCellDevice::new_no_delay(&adc_bus, gpioa.pa4.into_push_pull_output());
+    let Ok(adc_y_dev) = RefCellDevice::new_no_delay(&adc_bus, gpioc.pc4.into_push_pull_output());
+    let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
+    let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
+    let drdy = gpiob.pb0.into_pull_up_input();
+    let mut io = PinIoUpdate(gpiob.pb1.into_push_pull_output());
+
+    let mut delay = CycleDelay;
+    let mut adc_x = Ads131m08::new(adc_x_dev);
+    let mut adc_y = Ads131m08::new(adc_y_dev);
+    if adc_x
+        .init(&mut delay, &ads131m08::Config::PARAGYRO)
+        .is_err()
+        || adc_y
+            .init(&mut delay, &ads131m08::Config::PARAGYRO)
+            .is_err()
+    {
+        fail("ADS131M08 init failed");
+    }
+    let mut accel = Adxl355::new(accel_dev);
+    if accel.init(Range::G8, Odr::Hz500, HighPass::Off).is_err() {
+        fail("ADXL355 init failed");
+    }
+    let mut dds = Ad9959::new(dds_dev, DDS_REF_HZ * f64::from(DDS_PLL));
+    if dds.init().is_err() || dds.set_pll(DDS_REF_HZ, DDS_PLL).is_err() {
+        fail("AD9959 init failed");
+    }
+    if dds.take_io_update().is_some() {
+        use paragyro_firmware::app::IoUpdate;
+        io.pulse();
+    }
+
+    let cfg = Config::table2();
+    let chips = Chips {
+        adc_x,
+        adc_y,
+        accel,
+        dds,
+    };
+    let guard = PumpGuard::around(cfg.pump_centre_hz, GUARD_HALF_WIDTH_HZ);
+    let Ok(mut app) = App::new(
+        chips,
+        &cfg,
+        calibration(CAL_X_UM_PER_VOLT),
+        calibration(CAL_Y_UM_PER_VOLT),
+        guard,
+    ) else {
+        fail("configuration rejected")
+    };
+    if app
+        .set_pump_amplitude(PumpAmplitude {
+            base_scale: 1.0,
+            full_scale: 1.5625,
+        })
+        .is_err()
+        || app.start(&mut io).is_err()
+    {
+        fail("pump start failed");
+    }
+    defmt::info!("paragyro-firmware, stm32f405 board: running at 500 Hz (DRDY on PB0)");
+    #[cfg(feature = "capture")]
+    super::capture_header(&cfg);
+
+    let mut k: u32 = 0;
+    let mut drdy_timeouts: u32 = 0;
+    let mut cycles_sum: u64 = 0;
+    let mut cycles_max: u32 = 0;
+    loop {
+        // DRDY is active low; it returns high when the frame is read
+        let wait0 = DWT::cycle_count();
+        while drdy.is_high() {
+            if DWT::cycle_count().wrapping_sub(wait0) > DRDY_TIMEOUT_CYCLES {
+                drdy_timeouts = drdy_timeouts.saturating_add(1);
+                break;
+            }
+        }
+        let c0 = DWT::cycle_count();
+        let r = app.tick(&mut io);
+        let dt = DWT::cycle_count().wrapping_sub(c0);
+        cycles_sum += u64::from(dt);
+        cycles_max = cycles_max.max(dt);
+        #[cfg(feature = "capture")]
+        super::capture_tick(k, &app);
+        k = k.wrapping_add(1);
+        if k.is_multiple_of(super::TELEMETRY_EVERY) {
+            super::telemetry(k, cfg.fs_hz, &app, &r);
+            defmt::info!(
+                "tick cycles: mean {=u64} max {=u32} (last {=u32} ticks), DRDY timeouts {=u32}",
+                cycles_sum / u64::from(super::TELEMETRY_EVERY),
+                cycles_max,
+                super::TELEMETRY_EVERY,
+                drdy_timeouts
+            );
+            cycles_sum = 0;
+            cycles_max = 0;
+        }
+    }
+}
