@@ -24,6 +24,12 @@
 //! Features: `tick-stream` prints every tick's outputs (`TICK` lines, for the host
 //! comparison test), `capture` every tick's inputs (`CAP` lines, the capture mode).
 //!
+//! Profile mode (scripts/fw-profile.sh): built with `PARAGYRO_PROFILE_TICKS=N` in the
+//! environment, the board sets up as usual, then runs only the first `N` ticks (control
+//! events and `tick_with_pump`, nothing else: no checks, no telemetry) and exits 0, so
+//! that a per-address instruction histogram of an `N`-tick run minus that of a 0-tick run
+//! is exactly the ticks' instructions.
+//!
 //! [`App`]: paragyro_firmware::app::App
 //! [`App::tick_with_pump`]: paragyro_firmware::app::App::tick_with_pump
 
@@ -51,8 +57,50 @@ impl DelayNs for NoWait {
     fn delay_ns(&mut self, _ns: u32) {}
 }
 
+/// Stack painting: the free RAM between the end of the statics (`_stack_end`) and the
+/// current stack pointer is filled with this word at boot; the lowest word that no longer
+/// holds it after the run gives the stack's high-water mark.
+const PAINT: u32 = 0x5A5A_A5A5;
+
+unsafe extern "C" {
+    static _stack_end: u32;
+    static _stack_start: u32;
+}
+
+fn stack_bounds() -> (usize, usize) {
+    // only the addresses of the linker symbols are taken
+    (
+        core::ptr::addr_of!(_stack_end) as usize,
+        core::ptr::addr_of!(_stack_start) as usize,
+    )
+}
+
+#[inline(never)]
+fn paint_stack() {
+    let (lo, _) = stack_bounds();
+    // leave 256 bytes below the current frame alone
+    let hi = cortex_m::register::msp::read() as usize - 256;
+    let mut a = (lo + 3) & !3;
+    while a < hi {
+        // SAFETY: RAM between the statics and the live stack is unused at this point.
+        unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
+        a += 4;
+    }
+}
+
+fn stack_high_water() -> usize {
+    let (lo, top) = stack_bounds();
+    let mut a = (lo + 3) & !3;
+    // SAFETY: reading RAM inside the stack region.
+    while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
+        a += 4;
+    }
+    top - a
+}
+
 #[entry]
 fn main() -> ! {
+    paint_stack();
     let ok = match cortex_m::Peripherals::take() {
         Some(mut cp) => replay(&mut cp.SYST),
         None => false,
@@ -97,6 +145,23 @@ fn replay(syst: &mut SYST) -> bool {
     };
     #[cfg(feature = "capture")]
     super::capture_header(&table.config());
+    if let Some(n) = option_env!("PARAGYRO_PROFILE_TICKS") {
+        let n = n.parse::<usize>().unwrap_or(0).min(table.len());
+        for k in 0..n {
+            run::apply_controls(&table, k, &mut app);
+            let Some((pump_hz, pump_scale)) = table.pump(k) else {
+                return false;
+            };
+            let _ = app.tick_with_pump(&mut io, pump_hz, pump_scale);
+        }
+        defmt::info!("profile mode: {=usize} ticks run", n);
+        return true;
+    }
+
+    let setup_stack = stack_high_water();
+    // repaint: from here on the high-water mark is the tick loop's
+    paint_stack();
+    let loop_sp = cortex_m::register::msp::read() as usize;
 
     syst.set_clock_source(SystClkSource::Core);
     syst.set_reload(0x00FF_FFFF);
@@ -153,6 +218,16 @@ fn replay(syst: &mut SYST) -> bool {
         mean,
         max,
         worst_k
+    );
+    let loop_stack = stack_high_water();
+    let (_, top) = stack_bounds();
+    defmt::info!(
+        "stack high-water mark: set-up {=usize} B, tick loop {=usize} B = the board's frame {=usize} B (holding the App, {=usize} B) + {=usize} B below it (tick, checks, telemetry)",
+        setup_stack,
+        loop_stack,
+        top - loop_sp,
+        core::mem::size_of::<run::ReplayApp<'static>>(),
+        loop_stack.saturating_sub(top - loop_sp)
     );
     let v = check.verdict(&table, &app, dds.active_pump_hz());
     defmt::info!("core counters: {}", app.estimator().counters());
