@@ -10,7 +10,7 @@ from collections import defaultdict
 
 N, D = int(sys.argv[1]), sys.argv[2]
 GROUPS = [
-    ("replay devices (QEMU only: the fake chips' SPI)", [r"^paragyro_firmware::replay", r"<paragyro_firmware::replay"]),
+    ("replay devices (QEMU only: the fake chips' SPI)", [r"^paragyro_firmware::replay", r"<paragyro_firmware::replay", r"paragyro_firmware\.\.replay", r"Frame::encode"]),
     ("drivers (ADS131M08 frames + CRC, ADXL355, AD9959)", [r"paragyro_firmware::drivers"]),
     ("app glue (App::tick, guard, DDS plan)", [r"paragyro_firmware::app", r"paragyro_firmware::run"]),
     ("RLS (core::rls)", [r"paragyro_core::rls"]),

@@ -763,17 +763,12 @@ impl<T: Real> Estimator<T> {
             let mut sum2 = T::ZERO;
             for r in 0..NROWS {
                 let w = self.w1[r];
-                let mut phi = [T::ZERO; 8];
-                for j in 0..8 {
-                    phi[j] = rows.drive_phi[r][j] * self.sc1[j] * w;
-                }
+                // built by `from_fn`, not zeroed then filled (no memclr on the tick path)
+                let phi: [T; 8] = core::array::from_fn(|j| rows.drive_phi[r][j] * self.sc1[j] * w);
                 let inn = self.rls1.update(&phi, rows.drive_y[r] * w);
                 sum1 += inn.normalized_sq();
                 let w = self.w2[r];
-                let mut phi = [T::ZERO; 6];
-                for j in 0..6 {
-                    phi[j] = rows.sense_phi[r][j] * self.sc2[j] * w;
-                }
+                let phi: [T; 6] = core::array::from_fn(|j| rows.sense_phi[r][j] * self.sc2[j] * w);
                 let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
                 sum2 += inn.normalized_sq();
             }

@@ -415,23 +415,38 @@ impl<T: Real, const N: usize> Rls<T, N> {
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
     #[inline(never)]
     pub fn update(&mut self, phi: &[T; N], y: T) -> Innovation<T> {
-        if !y.is_finite() || phi.iter().any(|p| !p.is_finite()) {
+        if !all_finite(y, phi) {
             return self.reject(UpdateStatus::NonFiniteInput);
         }
 
-        // f = Uᵀφ, v = D∘f, s = 1 + fᵀv = 1 + φᵀPφ.
-        let mut f = [T::ZERO; N];
-        let mut v = [T::ZERO; N];
+        // f = Uᵀφ, v = D∘f, s = 1 + fᵀv = 1 + φᵀPφ. (`f` and `v` start as copies of φ
+        // rather than zeros: every element is written before it is read, and a copy is
+        // cheaper than a zeroing call on the tick path.)
+        let mut f = *phi;
+        let mut v = *phi;
         let mut s = T::ONE;
-        for j in 0..N {
-            let mut acc = phi[j];
-            for i in 0..j {
-                acc += self.u[i][j] * phi[i];
-            }
-            f[j] = acc;
-            v[j] = self.d[j] * acc;
-            s += acc * v[j];
+        macro_rules! f_col {
+            ($j:expr; $($i:expr),*) => {{
+                let j = $j;
+                #[allow(unused_mut)] // column 0 has no rows above the diagonal
+                let mut acc = phi[j];
+                $( acc += self.u[$i][j] * phi[$i]; )*
+                f[j] = acc;
+                v[j] = self.d[j] * acc;
+                s += acc * v[j];
+            }};
+            ($j:expr) => {{
+                let j = $j;
+                let mut acc = phi[j];
+                for i in 0..j {
+                    acc += self.u[i][j] * phi[i];
+                }
+                f[j] = acc;
+                v[j] = self.d[j] * acc;
+                s += acc * v[j];
+            }};
         }
+        unrolled_columns!(f_col);
         let e = residual(y, phi, &self.x);
         if !(s > T::ZERO && s.is_finite() && e.is_finite()) {
             // a huge but finite row can overflow s: reject it. If the factors themselves
@@ -449,26 +464,44 @@ impl<T: Real, const N: usize> Rls<T, N> {
         // overflow of U could produce a non-finite value, which the O(N) check below
         // catches on x and D (the state is then restored and the covariance reset).
         let x_old = self.x;
-        let mut k = [T::ZERO; N];
+        // k starts as v: k[j] must be v[j] when column j is reached, and the inner loop
+        // of column j only touches k[i] for i < j
+        let mut k = v;
         let mut alpha = T::ONE;
-        for j in 0..N {
-            let alpha_prev = alpha;
-            alpha = alpha_prev + f[j] * v[j];
-            self.d[j] *= alpha_prev / alpha;
-            let lj = -f[j] / alpha_prev;
-            for i in 0..j {
-                let uij = self.u[i][j];
-                self.u[i][j] = uij + lj * k[i];
-                k[i] += v[j] * uij;
-            }
-            k[j] = v[j];
+        macro_rules! bierman_col {
+            ($j:expr; $($i:expr),*) => {{
+                let j = $j;
+                let alpha_prev = alpha;
+                alpha = alpha_prev + f[j] * v[j];
+                self.d[j] *= alpha_prev / alpha;
+                let lj = -f[j] / alpha_prev;
+                $(
+                    let uij = self.u[$i][j];
+                    self.u[$i][j] = uij + lj * k[$i];
+                    k[$i] += v[j] * uij;
+                )*
+                let _ = lj;
+            }};
+            ($j:expr) => {{
+                let j = $j;
+                let alpha_prev = alpha;
+                alpha = alpha_prev + f[j] * v[j];
+                self.d[j] *= alpha_prev / alpha;
+                let lj = -f[j] / alpha_prev;
+                for i in 0..j {
+                    let uij = self.u[i][j];
+                    self.u[i][j] = uij + lj * k[i];
+                    k[i] += v[j] * uij;
+                }
+            }};
         }
+        unrolled_columns!(bierman_col);
         // `alpha` now equals `s` (same terms, same order); the gain is k/alpha.
         let g = e / alpha;
         for (xi, ki) in self.x.iter_mut().zip(k.iter()) {
             *xi += *ki * g;
         }
-        if !(self.x.iter().all(|t| t.is_finite()) && self.d.iter().all(|t| t.is_finite())) {
+        if !(all_finite(T::ZERO, &self.x) && all_finite(T::ZERO, &self.d)) {
             self.x = x_old;
             let p0 = self.settings.p0;
             self.reset_covariance(p0);
@@ -590,6 +623,40 @@ impl<T: Real, const N: usize> Rls<T, N> {
 /// accumulator, at ~4 extra flops per term. The products themselves are rounded once;
 /// the estimator keeps them small (it forms the innovation about θ_nom at the signal
 /// level and re-linearises every 0.1 s, so φᵀx stays near the noise level).
+/// Runs the column macro `$col` for j = 0, 1, …, N − 1 in order: the first eight columns
+/// written out with their row indices i < j (the triangular loops completely unrolled:
+/// the release profile builds the image for size and does not unroll them itself; `if
+/// j < N` folds away per instantiation), any further ones in a plain loop. Same
+/// operations in the same order as `for j in 0..N { for i in 0..j { … } }`.
+macro_rules! unrolled_columns {
+    ($col:ident) => {{
+        if 0 < N { $col!(0usize;); }
+        if 1 < N { $col!(1usize; 0); }
+        if 2 < N { $col!(2usize; 0, 1); }
+        if 3 < N { $col!(3usize; 0, 1, 2); }
+        if 4 < N { $col!(4usize; 0, 1, 2, 3); }
+        if 5 < N { $col!(5usize; 0, 1, 2, 3, 4); }
+        if 6 < N { $col!(6usize; 0, 1, 2, 3, 4, 5); }
+        if 7 < N { $col!(7usize; 0, 1, 2, 3, 4, 5, 6); }
+        for j in 8..N {
+            $col!(j);
+        }
+    }};
+}
+use unrolled_columns;
+
+/// `y` and every element of `v` are finite: `y·0 + Σ vᵢ·0` is ±0 exactly when they all
+/// are (∞·0 and NaN·0 are NaN, and NaN propagates through the sum), in one test instead
+/// of one per element.
+#[inline]
+fn all_finite<T: Real, const N: usize>(y: T, v: &[T; N]) -> bool {
+    let mut acc = y * T::ZERO;
+    for &t in v {
+        acc += t * T::ZERO;
+    }
+    acc == T::ZERO
+}
+
 #[inline]
 fn residual<T: Real, const N: usize>(y: T, phi: &[T; N], x: &[T; N]) -> T {
     let mut sum = y;

@@ -325,6 +325,8 @@ pub struct TickReport {
 struct InEffect {
     plan: PumpPlan,
     asf: AmplitudeWord,
+    /// `plan.pump_hz()`, computed once when the plan changes (soft-float on the M4F).
+    pump_hz: f64,
 }
 
 /// The firmware application: chips, calibrations, the `f32` estimator and the pump.
@@ -335,6 +337,8 @@ pub struct App<AX, AY, XL, DDS> {
     cal_x: LockinCalibration,
     cal_y: LockinCalibration,
     guard: PumpGuard,
+    /// The guard as reference words: [`PumpGuard::plan`] of its ends.
+    guard_words: (u32, u32),
     amplitude: PumpAmplitude,
     /// A lock-in value beyond the core's full scale (saturated codes), µm.
     lockin_beyond_um: f32,
@@ -498,12 +502,16 @@ where
         guard: PumpGuard,
     ) -> Result<Self, ConfigError> {
         let est = cfg.build::<f32>()?;
-        guard.validate(chips.dds.sysclk_hz(), est.initial_pump_hz())?;
+        let sysclk = chips.dds.sysclk_hz();
+        guard.validate(sysclk, est.initial_pump_hz())?;
+        let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
+        let guard_words = (word(guard.min_hz), word(guard.max_hz));
         Ok(Self {
             chips,
             cal_x,
             cal_y,
             guard,
+            guard_words,
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: beyond(cfg.monitor.full_scale_um),
             accel_beyond_mps2: beyond(cfg.monitor.accel_full_scale_mps2),
@@ -626,7 +634,7 @@ where
         let target = if requested.is_finite() {
             requested
         } else {
-            current.map_or(self.guard.midpoint(), |p| p.plan.pump_hz())
+            current.map_or(self.guard.midpoint(), |p| p.pump_hz)
         };
         if !self.guard.contains(target) || !requested.is_finite() {
             bump(&mut self.counters.guard_clamps);
@@ -641,7 +649,7 @@ where
             faults |= fault::GUARD;
             current.map_or(self.amplitude.word_for(1.0), |p| p.asf)
         };
-        let Some(plan) = self.guard.plan(target, self.chips.dds.sysclk_hz()) else {
+        let Some(plan) = self.guard_plan(target) else {
             // cannot happen for a validated guard; keep the pump and rewrite next time
             bump(&mut self.counters.dds_errors);
             self.dirty = true;
@@ -651,6 +659,21 @@ where
             faults |= fault::DDS;
         }
         faults
+    }
+
+    /// [`PumpGuard::plan`] in integer words on the tick path: the nearest reference word
+    /// `k = round(f/2 · 2^32 / f_SYSCLK)` (the same `f64` operations as
+    /// [`ad9959::ftw_from_hz`]: the power-of-two scalings are exact), clamped to the
+    /// guard's words. Rounding is monotone, so this is the word `plan` picks (clamp, round,
+    /// step inwards) with one division instead of two plans; NaN and negative requests
+    /// give the lower guard word, huge ones the upper.
+    fn guard_plan(&self, pump_hz: f64) -> Option<PumpPlan> {
+        let sysclk = self.chips.dds.sysclk_hz();
+        let x = pump_hz * 0.5 * FTW_SCALE / sysclk;
+        // saturating cast: NaN and negatives give 0, overflow u32::MAX
+        let k = (x + 0.5) as u32;
+        let (lo, hi) = self.guard_words;
+        PumpPlan::from_reference_ftw(k.clamp(lo, hi), sysclk)
     }
 
     /// Writes the words that differ from the ones in effect (all of them after an error
@@ -663,10 +686,10 @@ where
         io: &mut IO,
     ) -> Result<(), ad9959::Error<DDS::Error>> {
         let all = self.dirty;
-        let freq = all
-            || self
-                .pump
-                .is_none_or(|p| p.plan.reference_ftw() != plan.reference_ftw());
+        let same_word = self
+            .pump
+            .filter(|p| p.plan.reference_ftw() == plan.reference_ftw());
+        let freq = all || same_word.is_none();
         let amp = all || self.pump.is_none_or(|p| p.asf != asf);
         match write_pump(
             &mut self.chips.dds,
@@ -677,7 +700,8 @@ where
                 if self.chips.dds.take_io_update().is_some() {
                     io.pulse();
                 }
-                self.pump = Some(InEffect { plan, asf });
+                let pump_hz = same_word.map_or_else(|| plan.pump_hz(), |p| p.pump_hz);
+                self.pump = Some(InEffect { plan, asf, pump_hz });
                 self.dirty = false;
                 Ok(())
             }
@@ -692,7 +716,7 @@ where
     /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before
     /// the first successful DDS write.
     pub fn pump_hz(&self) -> f64 {
-        self.pump.map_or(f64::NAN, |p| p.plan.pump_hz())
+        self.pump.map_or(f64::NAN, |p| p.pump_hz)
     }
 
     /// Pump scale `s` in effect; NaN before the first successful DDS write.
@@ -743,5 +767,54 @@ where
     /// Gives the chips and the estimator back.
     pub fn release(self) -> (Chips<AX, AY, XL, DDS>, Estimator<f32>) {
         (self.chips, self.est)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::FailingSpi;
+    use crate::drivers::ad9959::DEFAULT_SYSCLK_HZ;
+
+    /// The tick path's integer guard plan picks the very word of `PumpGuard::plan`.
+    #[test]
+    fn guard_plan_in_words_equals_the_f64_plan() {
+        let cfg = Config::table2();
+        let chips = Chips {
+            adc_x: Ads131m08::new(FailingSpi::always_failing()),
+            adc_y: Ads131m08::new(FailingSpi::always_failing()),
+            accel: Adxl355::new(FailingSpi::always_failing()),
+            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
+        };
+        let guard = PumpGuard::around(cfg.pump_centre_hz, 400.0);
+        let cal = LockinCalibration::from_um_per_volt(
+            [1.0; LOCKIN_CHANNELS],
+            [ads131m08::Gain::G1; LOCKIN_CHANNELS],
+            [0; LOCKIN_CHANNELS],
+        );
+        let app = App::new(chips, &cfg, cal, cal, guard).unwrap();
+        let step = 2.0 * DEFAULT_SYSCLK_HZ / FTW_SCALE;
+        let mut hz = guard.min_hz - 3.0;
+        let mut n = 0;
+        while hz < guard.max_hz + 3.0 {
+            // steps of a third of a word, so every rounding case and both edges are hit
+            let want = guard.plan(hz, DEFAULT_SYSCLK_HZ).unwrap();
+            assert_eq!(app.guard_plan(hz), Some(want), "{hz} Hz");
+            hz += step / 3.0 + 1e-7;
+            n += 1;
+        }
+        assert!(n > 10_000);
+        for hz in [f64::NAN, f64::NEG_INFINITY, -1.0, 0.0] {
+            assert_eq!(
+                app.guard_plan(hz),
+                guard.plan(guard.min_hz, DEFAULT_SYSCLK_HZ)
+            );
+        }
+        for hz in [f64::INFINITY, 1e300, 3e9] {
+            assert_eq!(
+                app.guard_plan(hz),
+                guard.plan(guard.max_hz, DEFAULT_SYSCLK_HZ)
+            );
+        }
     }
 }

@@ -479,6 +479,8 @@ impl ErrorType for ReplayAdc<'_> {
 }
 
 impl SpiDevice<u8> for ReplayAdc<'_> {
+    // never inlined: the instruction profile then tells the fake chip from the driver
+    #[inline(never)]
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), ReplayError> {
         self.transactions = self.transactions.saturating_add(1);
         // pass 1: MOSI (the command word and the first data word are all that matter)
@@ -763,6 +765,8 @@ impl ErrorType for ReplayAccel<'_> {
 }
 
 impl SpiDevice<u8> for ReplayAccel<'_> {
+    // never inlined: the instruction profile then tells the fake chip from the driver
+    #[inline(never)]
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), ReplayError> {
         self.transactions = self.transactions.saturating_add(1);
         let sample_read = first_mosi(operations) == Some(XlReg::Status.read_cmd());
@@ -1118,6 +1122,8 @@ impl DdsStream {
 }
 
 impl SpiDevice<u8> for CaptureDds<'_> {
+    // never inlined: the instruction profile then tells the fake chip from the driver
+    #[inline(never)]
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), ReplayError> {
         let cap = self.cap;
         let index = cap.transactions.get();

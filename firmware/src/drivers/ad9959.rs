@@ -220,6 +220,19 @@ impl PumpPlan {
         }
     }
 
+    /// Plan for a reference word `k` (pump `2k`, 3Ω `3k`); `None` unless `k > 0` and
+    /// `3k < 2^31`, the same conditions as [`PumpPlan::new`].
+    pub fn from_reference_ftw(reference_ftw: u32, sysclk_hz: f64) -> Option<Self> {
+        let ok = reference_ftw > 0
+            && reference_ftw
+                .checked_mul(3)
+                .is_some_and(|third| third < 1 << 31);
+        ok.then_some(Self {
+            reference_ftw,
+            sysclk_hz,
+        })
+    }
+
     /// SYSCLK the words are for.
     pub const fn sysclk_hz(&self) -> f64 {
         self.sysclk_hz

@@ -723,8 +723,10 @@ impl LockinCalibration {
             .zip(self.um_per_code.iter())
             .zip(self.offset_code.iter())
         {
-            // In i64 the difference of two i32 cannot overflow.
-            *o = i64::from(c.get()).saturating_sub(i64::from(*off)) as f32 * s;
+            // A code is 24-bit, so the difference with any sane offset fits an i32; it
+            // saturates (rather than wraps) for an absurd one. i32 → f32 is one VCVT,
+            // where i64 → f32 was a library call on the tick path.
+            *o = c.get().saturating_sub(*off) as f32 * s;
         }
         let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = v;
         LockinUm {
