@@ -177,7 +177,11 @@ impl Supervisor {
         let (lo, hi) = band?;
         let w = hi - lo;
         let (lo, hi) = (lo + self.margin * w, hi - self.margin * w);
-        Some(libm::sqrt(wy2).clamp(lo, hi))
+        // not `f64::clamp`: it panics when lo > hi or either is NaN (a bad band or a
+        // margin above 0.5); max/min never panic and agree with it everywhere else
+        // (`sqrt(wy2)` is finite here). Its panic message also pulled ≈ 15 KB of float
+        // formatting into the firmware image.
+        Some(libm::sqrt(wy2).max(lo).min(hi))
     }
 
     /// One tick of the supervisor.
