@@ -90,7 +90,9 @@ fn range_of(bits: u32) -> Option<Range> {
 
 /// Builds the replay board over `table`, initialises the chips through their drivers,
 /// creates the [`App`] with the table's configuration and starts the pump (through `io`,
-/// the DDS capture's IO_UPDATE line).
+/// the DDS capture's IO_UPDATE line). Never inlined: the set-up's temporaries (the
+/// estimator's design) then live in this frame, which is gone when the ticks run.
+#[inline(never)]
 pub fn replay_app<'a, D: DelayNs>(
     table: ReplayTable<'a>,
     dds: &'a DdsCapture,

@@ -136,10 +136,12 @@ fn replay(syst: &mut SYST) -> bool {
     );
     let dds = DdsCapture::new(DEFAULT_SYSCLK_HZ);
     let mut io = dds.io_update();
-    let mut app = match run::replay_app(table, &dds, &mut io, &mut NoWait) {
+    // the App stays where `replay_app` returned it (no 5 KB move out of the Result)
+    let mut setup = run::replay_app(table, &dds, &mut io, &mut NoWait);
+    let app = match &mut setup {
         Ok(a) => a,
         Err(e) => {
-            defmt::error!("board setup failed: {}", defmt::Debug2Format(&e));
+            defmt::error!("board setup failed: {}", defmt::Debug2Format(e));
             return false;
         }
     };
@@ -148,7 +150,7 @@ fn replay(syst: &mut SYST) -> bool {
     if let Some(n) = option_env!("PARAGYRO_PROFILE_TICKS") {
         let n = n.parse::<usize>().unwrap_or(0).min(table.len());
         for k in 0..n {
-            run::apply_controls(&table, k, &mut app);
+            run::apply_controls(&table, k, app);
             let Some((pump_hz, pump_scale)) = table.pump(k) else {
                 return false;
             };
@@ -172,7 +174,7 @@ fn replay(syst: &mut SYST) -> bool {
     let mut worst: u32 = 0;
     let mut worst_k: usize = 0;
     for k in 0..table.len() {
-        run::apply_controls(&table, k, &mut app);
+        run::apply_controls(&table, k, app);
         let Some((pump_hz, pump_scale)) = table.pump(k) else {
             return false;
         };
@@ -185,7 +187,7 @@ fn replay(syst: &mut SYST) -> bool {
             worst = dt;
             worst_k = k;
         }
-        check.observe(&table, k, &app, &r, dds.active_pump_hz());
+        check.observe(&table, k, app, &r, dds.active_pump_hz());
         #[cfg(feature = "tick-stream")]
         {
             let (t1, t2) = app.estimator().theta();
@@ -204,9 +206,9 @@ fn replay(syst: &mut SYST) -> bool {
             );
         }
         #[cfg(feature = "capture")]
-        super::capture_tick(k as u32, &app);
+        super::capture_tick(k as u32, app);
         if (k as u32).is_multiple_of(super::TELEMETRY_EVERY) {
-            super::telemetry(k as u32, fs_hz, &app, &r);
+            super::telemetry(k as u32, fs_hz, app, &r);
         }
     }
     let n = table.len().max(1) as u64;
@@ -229,7 +231,7 @@ fn replay(syst: &mut SYST) -> bool {
         core::mem::size_of::<run::ReplayApp<'static>>(),
         loop_stack.saturating_sub(top - loop_sp)
     );
-    let v = check.verdict(&table, &app, dds.active_pump_hz());
+    let v = check.verdict(&table, app, dds.active_pump_hz());
     defmt::info!("core counters: {}", app.estimator().counters());
     defmt::info!("firmware counters: {}", app.counters());
     defmt::info!(

@@ -172,13 +172,15 @@ fn main() -> ! {
         dds,
     };
     let guard = PumpGuard::around(cfg.pump_centre_hz, GUARD_HALF_WIDTH_HZ);
-    let Ok(mut app) = App::new(
+    // the App stays where `App::new` returned it (no 5 KB move out of the Result)
+    let mut created = App::new(
         chips,
         &cfg,
         calibration(CAL_X_UM_PER_VOLT),
         calibration(CAL_Y_UM_PER_VOLT),
         guard,
-    ) else {
+    );
+    let Ok(app) = &mut created else {
         fail("configuration rejected")
     };
     if app
@@ -214,10 +216,10 @@ fn main() -> ! {
         cycles_sum += u64::from(dt);
         cycles_max = cycles_max.max(dt);
         #[cfg(feature = "capture")]
-        super::capture_tick(k, &app);
+        super::capture_tick(k, app);
         k = k.wrapping_add(1);
         if k.is_multiple_of(super::TELEMETRY_EVERY) {
-            super::telemetry(k, cfg.fs_hz, &app, &r);
+            super::telemetry(k, cfg.fs_hz, app, &r);
             defmt::info!(
                 "tick cycles: mean {=u64} max {=u32} (last {=u32} ticks), DRDY timeouts {=u32}",
                 cycles_sum / u64::from(super::TELEMETRY_EVERY),
