@@ -569,13 +569,24 @@ impl<T: Real, const N: usize> Rls<T, N> {
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
     pub fn trace(&self) -> T {
         let mut tr = T::ZERO;
-        for j in 0..N {
-            let mut col = T::ZERO;
-            for i in 0..=j {
-                col += self.u[i][j] * self.u[i][j];
-            }
-            tr += self.d[j] * col;
+        macro_rules! trace_col {
+            ($j:expr; $($i:expr),*) => {{
+                let j = $j;
+                let mut col = T::ZERO;
+                $( col += self.u[$i][j] * self.u[$i][j]; )*
+                col += self.u[j][j] * self.u[j][j];
+                tr += self.d[j] * col;
+            }};
+            ($j:expr) => {{
+                let j = $j;
+                let mut col = T::ZERO;
+                for i in 0..=j {
+                    col += self.u[i][j] * self.u[i][j];
+                }
+                tr += self.d[j] * col;
+            }};
         }
+        unrolled_columns!(trace_col);
         tr
     }
 
@@ -651,9 +662,12 @@ use unrolled_columns;
 #[inline]
 fn all_finite<T: Real, const N: usize>(y: T, v: &[T; N]) -> bool {
     let mut acc = y * T::ZERO;
-    for &t in v {
-        acc += t * T::ZERO;
+    macro_rules! add {
+        ($j:expr $(; $($i:expr),*)?) => {
+            acc += v[$j] * T::ZERO
+        };
     }
+    unrolled_columns!(add);
     acc == T::ZERO
 }
 
@@ -661,16 +675,21 @@ fn all_finite<T: Real, const N: usize>(y: T, v: &[T; N]) -> bool {
 fn residual<T: Real, const N: usize>(y: T, phi: &[T; N], x: &[T; N]) -> T {
     let mut sum = y;
     let mut comp = T::ZERO;
-    for (&p, &xi) in phi.iter().zip(x.iter()) {
-        let term = -(p * xi);
-        let t = sum + term;
-        if sum.abs() >= term.abs() {
-            comp += (sum - t) + term;
-        } else {
-            comp += (term - t) + sum;
-        }
-        sum = t;
+    macro_rules! term {
+        ($j:expr $(; $($i:expr),*)?) => {{
+            let j = $j;
+            let term = -(phi[j] * x[j]);
+            let t = sum + term;
+            if sum.abs() >= term.abs() {
+                comp += (sum - t) + term;
+            } else {
+                comp += (term - t) + sum;
+            }
+            sum = t;
+        }};
     }
+    // in index order, the first eight written out (see `unrolled_columns`)
+    unrolled_columns!(term);
     let r = sum + comp;
     if r.is_finite() { r } else { sum }
 }

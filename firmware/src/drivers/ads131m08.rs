@@ -768,8 +768,10 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
 
     /// One full frame carrying `words`; returns the CRC-checked received frame.
     fn exchange_checked(&mut self, words: &[u16]) -> Result<Frame, Error<SPI::Error>> {
-        let bytes = self.exchange(words)?;
-        Ok(Frame::decode(&bytes)?)
+        // decoded where it was received (no copy of the frame through a `Result`)
+        let mut buf = command_frame(words);
+        self.spi.transfer_in_place(&mut buf).map_err(Error::Spi)?;
+        Ok(Frame::decode(&buf)?)
     }
 
     /// A command frame followed by a `NULL` frame; returns the command's response word.
