@@ -662,6 +662,38 @@ pub fn command_frame(words: &[u16]) -> [u8; FRAME_BYTES] {
     bytes
 }
 
+/// One CRC-16-CCITT step (bitwise, for constants).
+const fn crc16_ccitt_byte_const(crc: u16, byte: u8) -> u16 {
+    let mut crc = crc ^ ((byte as u16) << 8);
+    let mut i = 0u8;
+    while i < 8 {
+        crc = if crc & 0x8000 != 0 {
+            (crc << 1) ^ CRC_CCITT_POLY
+        } else {
+            crc << 1
+        };
+        i = i.wrapping_add(1);
+    }
+    crc
+}
+
+/// The `NULL` command frame ([`command_frame`]`(&[opcode::NULL])`), precomputed: the
+/// frame every data read sends, so the tick path builds no frame and computes no CRC.
+pub const NULL_FRAME: [u8; FRAME_BYTES] = {
+    let [hi, lo] = opcode::NULL.to_be_bytes();
+    let crc = crc16_ccitt_byte_const(
+        crc16_ccitt_byte_const(crc16_ccitt_byte_const(CRC_SEED, hi), lo),
+        0,
+    );
+    let [c_hi, c_lo] = crc.to_be_bytes();
+    let mut f = [0u8; FRAME_BYTES];
+    f[0] = hi;
+    f[1] = lo;
+    f[3] = c_hi;
+    f[4] = c_lo;
+    f
+};
+
 /// Lock-in outputs of one axis in µm.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -885,7 +917,9 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
     /// Call it after DRDY asserts. Fails with [`Error::Crc`] on a corrupted frame and
     /// with [`Error::NotReady`] when the DRDY flags of the lock-in channels are not all set.
     pub fn read_frame(&mut self) -> Result<Frame, Error<SPI::Error>> {
-        let frame = self.exchange_checked(&[opcode::NULL])?;
+        let mut buf = NULL_FRAME;
+        self.spi.transfer_in_place(&mut buf).map_err(Error::Spi)?;
+        let frame = Frame::decode(&buf)?;
         if frame.status().lockin_ready() {
             Ok(frame)
         } else {
@@ -896,6 +930,13 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn null_frame_constant_is_the_null_command_frame() {
+        assert_eq!(
+            super::NULL_FRAME,
+            super::command_frame(&[super::opcode::NULL])
+        );
+    }
 
     #[test]
     fn table_crc_equals_bitwise_crc() {
