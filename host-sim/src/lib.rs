@@ -4,7 +4,11 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod averaged;
+pub mod blind;
 pub mod claims;
+pub mod diagnose;
+pub mod diagplot;
+pub mod effects;
 pub mod lockin;
 pub mod paper001;
 pub mod paper_raw;

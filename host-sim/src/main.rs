@@ -125,6 +125,47 @@ enum Command {
         /// Override the scenario's noise seed.
         #[arg(long)]
         seed: Option<u64>,
+        /// Add an effect to the simulated device: NAME=SIZE (angular_vibration=SIZE@BEAT_HZ);
+        /// repeatable. Names and units: `paragyro-sim effects`.
+        #[arg(long = "effect", value_name = "NAME=SIZE")]
+        effects: Vec<paragyro_sim::effects::EffectSpec>,
+        /// Die temperature START_C:RISE_K (linear over the run), written as temp_c.
+        #[arg(long, value_name = "START_C:RISE_K", value_parser = parse_temp)]
+        temp: Option<(f64, f64)>,
+        /// A rate table is present: write the true rate as rate_ref_dps.
+        #[arg(long)]
+        rate_table: bool,
+    },
+    /// List the effects the simulator can add (names, units, what they add).
+    Effects,
+    /// Blind benchmark of the diagnosis: draw N records with withheld effects, seal the
+    /// labels, diagnose each, score (score.md, score.json).
+    Blind {
+        /// Number of records.
+        #[arg(long, default_value_t = 100)]
+        n: usize,
+        /// Seed of the draw (the development seeds were 1 and 2; score on others).
+        #[arg(long)]
+        seed: u64,
+        /// Output directory (created if needed).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
+    /// Diagnose the gap between a record and the simulator: where it lies, which effect
+    /// causes it, how far it shrinks once that effect is added (report.md, report.json, PNGs).
+    Diagnose {
+        /// The record (CSV, docs/record-format.md). Its truth file is never read.
+        record: PathBuf,
+        /// Output directory (created if needed).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// The simulator configuration to compare with: a built-in scenario name or a
+        /// scenario TOML (its plant at t = 0); default Table 2.
+        #[arg(long, value_name = "SCENARIO")]
+        model: Option<String>,
+        /// Skip the re-simulation (no output error, faster).
+        #[arg(long)]
+        no_resim: bool,
     },
     /// Run the core open-loop on a record; write estimates.csv and summary.json.
     Replay {
@@ -173,6 +214,21 @@ struct Failure {
 
 fn fail(code: u8) -> impl FnOnce(anyhow::Error) -> Failure {
     move |error| Failure { code, error }
+}
+
+/// `START_C:RISE_K` → (start, rise).
+fn parse_temp(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("'{s}': expected START_C:RISE_K, e.g. 25:5"))?;
+    let num = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("'{v}' is not a finite number"))
+    };
+    Ok((num(a)?, num(b)?))
 }
 
 fn main() -> ExitCode {
@@ -331,15 +387,55 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             }
             say(out, &text)
         }
+        Command::Blind { n, seed, out: dir } => {
+            let mut err = std::io::stderr();
+            let summary = paragyro_sim::blind::run(n, seed, &dir, &mut |m| {
+                let _ = writeln!(err, "{m}");
+            })
+            .map_err(fail(EXIT_RUN))?;
+            let p = |k: &str| {
+                summary[k]
+                    .as_f64()
+                    .map_or("–".into(), |x| format!("{:.0} %", 100.0 * x))
+            };
+            say(
+                out,
+                &format!(
+                    "Blind benchmark, N = {n}, seed {seed}:\n  top-1 (single, above limit) {}\n  unknown on out-of-library {}\n  false alarms on clean {}\n  median closure / oracle {}\nWrote {}/score.md and score.json\n",
+                    p("top1_single_above_limit"),
+                    p("unknown_on_outside"),
+                    p("false_alarms_on_clean"),
+                    p("median_closure_over_oracle"),
+                    dir.display()
+                ),
+            )
+        }
+        Command::Effects => {
+            let mut text = String::from("Effects the simulator can add (--effect NAME=SIZE):\n");
+            for (name, what) in paragyro_sim::effects::describe() {
+                let lib = if paragyro_sim::effects::LIBRARY.contains(&name) {
+                    "library"
+                } else {
+                    "outside the library"
+                };
+                text.push_str(&format!("  {name:<24} {what} [{lib}]\n"));
+            }
+            say(out, &text)
+        }
         Command::Record {
             scenario,
             out: file,
             seed,
+            effects,
+            temp,
+            rate_table,
         } => {
             let sc = load(&scenario)?;
             let opts = record::RecordOptions {
                 seed,
-                ..record::RecordOptions::default()
+                effects,
+                temp,
+                rate_table,
             };
             let (files, rec) = record::write_simulated_record(&sc, &file, &opts, &mut |_| {})
                 .with_context(|| format!("cannot record scenario '{}'", sc.name))
@@ -355,6 +451,84 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
                     files.truth.display()
                 ),
             )
+        }
+        Command::Diagnose {
+            record: file,
+            out: dir,
+            model,
+            no_resim,
+        } => {
+            let rec = record::read_record(&file).map_err(|e| Failure {
+                code: EXIT_LOAD,
+                error: anyhow::Error::new(e),
+            })?;
+            let mut err = std::io::stderr();
+            for w in &rec.warnings {
+                let _ = writeln!(err, "warning: {w}");
+            }
+            let mut opts = paragyro_sim::diagnose::Options {
+                resimulate: !no_resim,
+                ..Default::default()
+            };
+            if let Some(m) = model {
+                opts.model = paragyro_sim::diagnose::Model::from_scenario(&load(&m)?);
+            }
+            let _ = writeln!(
+                err,
+                "diagnosing {} ({} samples, {:.1} s){}",
+                file.display(),
+                rec.rows.len(),
+                rec.duration_s(),
+                if opts.resimulate {
+                    ", with the re-simulation"
+                } else {
+                    ""
+                }
+            );
+            let d = paragyro_sim::diagnose::diagnose(&rec, &opts)
+                .with_context(|| format!("cannot diagnose {}", file.display()))
+                .map_err(fail(EXIT_RUN))?;
+            let name = file
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+            let files =
+                paragyro_sim::diagnose::write_report(&dir, &d, &name).map_err(fail(EXIT_RUN))?;
+            let j = &d.json;
+            let mut text = format!(
+                "Verdict: {}{}\n",
+                d.verdict,
+                j["secondary"]["effect"]
+                    .as_str()
+                    .map(|e| format!(" (and {e})"))
+                    .unwrap_or_default()
+            );
+            for c in d.ranking.iter().filter(|c| c.untestable.is_none()).take(3) {
+                text.push_str(&format!(
+                    "  {:<24} size {:.4e} ± {:.1e} {}  gap closure {:5.1} %{}\n",
+                    c.effect,
+                    c.size,
+                    c.size_sigma,
+                    paragyro_sim::effects::unit(&c.effect),
+                    100.0 * c.gap_closure,
+                    if c.significant { "  significant" } else { "" }
+                ));
+            }
+            text.push_str(&format!(
+                "Held-out gap: {:.4e} → {:.4e} ({:.1} % closed); output error closure {}\n",
+                j["gap_before"].as_f64().unwrap_or(f64::NAN),
+                j["gap_after"].as_f64().unwrap_or(f64::NAN),
+                100.0 * j["gap_closure"].as_f64().unwrap_or(f64::NAN),
+                j["output_error"]["closure"]
+                    .as_f64()
+                    .map_or("not computed".into(), |v| format!("{:.1} %", 100.0 * v))
+            ));
+            text.push_str(&format!(
+                "Took {:.2} s. Wrote {} files to {}\n",
+                j["seconds"].as_f64().unwrap_or(f64::NAN),
+                files.len(),
+                dir.display()
+            ));
+            say(out, &text)
         }
         Command::Replay {
             record: file,

@@ -42,6 +42,7 @@
 //! generator is `Xoshiro256PlusPlus` seeded from [`SimConfig::seed`]; with a density of
 //! 0 no random numbers are drawn and the run is exactly deterministic.
 
+use crate::effects::{ES_C3, Effects};
 use crate::lockin::{BlockLpf, LockinOut, mixer_products};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -231,6 +232,12 @@ pub struct GyroSim {
     lpf: BlockLpf,
     /// Noise source (`sigma == 0`: noise-free run, nothing drawn).
     noise: Noise,
+    /// Effects beyond eq. (6) (all zero: the nominal model, and the fast path).
+    fx: Effects,
+    /// Angular vibration frequency Ω_v/ω0 (non-dimensional).
+    vib_omega: f64,
+    /// Angular vibration phase Ω_v·τ at the current time, wrapped.
+    vib_phase: f64,
 }
 
 /// Pump and reference quantities at one instant, as seen by `rhs` and `measure`.
@@ -244,6 +251,10 @@ struct Drive {
     ax: f64,
     /// ãy.
     ay: f64,
+    /// Angular vibration γ1·sin(Ω_v τ) (0 without the effect).
+    gv: f64,
+    /// Its derivative γ1·Ω_v·cos(Ω_v τ).
+    gvd: f64,
 }
 
 // =======================================================================================
@@ -268,6 +279,27 @@ fn rhs(th: &Theta, z: &[f64; 4], d: &Drive) -> [f64; 4] {
     [xd, xdd, yd, ydd]
 }
 
+/// [`rhs`] plus the effects of [`crate::effects`] (EFFECTS.md terms, non-dimensional).
+#[inline(always)]
+fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
+    let [x, xd, y, yd] = *z;
+    let [_, xdd, _, ydd] = rhs(th, z, d);
+    let (x2, y2) = (x * x, y * y);
+    let pump = d.s * (1.0 + d.cos2psi);
+    let dx = -fx.geometric * y * (x * y + 2.0 * xd * yd)
+        + (2.0 * d.gv - 0.5 * fx.anisodamping) * yd
+        + d.gvd * y
+        - fx.nl_damping * x2 * xd
+        - fx.quadratic * x2;
+    let dy = fx.geometric * y * xd * xd + (0.5 * fx.anisodamping - 2.0 * d.gv) * xd
+        - d.gvd * x
+        - fx.electrostatic * y * (1.0 + ES_C3 * y2)
+        - fx.nl_damping * y2 * yd
+        + fx.force_leak * pump * x * (th.drive[5] + th.drive[6] * x2)
+        - fx.quadratic * y2;
+    [xd, xdd + dx, yd, ydd + dy]
+}
+
 // =======================================================================================
 // THE MEASUREMENT: what the pick-off delivers to the lock-in mixers. Measurement effects
 // (pump feedthrough, pick-off gain/phase mismatch, ...) go here; `_cos_psi`, `_sin_psi`
@@ -279,10 +311,43 @@ fn measure(z: &[f64; 4], noise: [f64; 2], _cos_psi: f64, _sin_psi: f64, _d: &Dri
     [z[0] + noise[0], z[2] + noise[1]]
 }
 
+/// [`measure`] with the measurement effects: the pump feedthrough `C·s·(1 + cos2ψ)` and
+/// the pick-off gain error on Y.
+#[inline(always)]
+fn measure_fx(z: &[f64; 4], noise: [f64; 2], d: &Drive, fx: &Effects) -> [f64; 2] {
+    let ft = fx.feedthrough * d.s * (1.0 + d.cos2psi);
+    [
+        z[0] + noise[0],
+        (1.0 + fx.readout_gain) * z[2] + ft + noise[1],
+    ]
+}
+
 /// One classic RK4 step of length `h` with the inputs at the start (`da`), the middle
 /// (`dh`) and the end (`de`) of the step.
 #[inline(always)]
+#[cfg(test)]
 fn rk4_step(th: &Theta, z: &[f64; 4], h: f64, da: &Drive, dh: &Drive, de: &Drive) -> [f64; 4] {
+    rk4_step_g::<false>(th, z, h, da, dh, de, &Effects::default())
+}
+
+/// [`rk4_step`] with (`FX`) or without the effects.
+#[inline(always)]
+fn rk4_step_g<const FX: bool>(
+    th: &Theta,
+    z: &[f64; 4],
+    h: f64,
+    da: &Drive,
+    dh: &Drive,
+    de: &Drive,
+    fx: &Effects,
+) -> [f64; 4] {
+    let rhs = |th: &Theta, z: &[f64; 4], d: &Drive| {
+        if FX {
+            rhs_fx(th, z, d, fx)
+        } else {
+            rhs(th, z, d)
+        }
+    };
     let hh = 0.5 * h;
     let [x, v, y, w] = *z;
     let k1 = rhs(th, z, da);
@@ -456,6 +521,9 @@ impl GyroSim {
             k: 0,
             lpf,
             noise,
+            fx: Effects::default(),
+            vib_omega: 0.0,
+            vib_phase: 0.0,
         };
         // first lock-in sample at τ = 0 (ψ = 0); s is irrelevant to the measurement here
         let d0 = Drive {
@@ -463,6 +531,8 @@ impl GyroSim {
             s: 1.0,
             ax: 0.0,
             ay: 0.0,
+            gv: 0.0,
+            gvd: 0.0,
         };
         let n = if sim.noise.sigma > 0.0 {
             sim.noise.draw::<true>()
@@ -484,17 +554,51 @@ impl GyroSim {
     pub fn advance(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
         let noise = self.noise.sigma > 0.0;
         let chirp = u1.omega != u0.omega;
-        match (noise, chirp) {
-            (true, true) => self.run_interval::<true, true>(theta, u0, u1),
-            (true, false) => self.run_interval::<true, false>(theta, u0, u1),
-            (false, true) => self.run_interval::<false, true>(theta, u0, u1),
-            (false, false) => self.run_interval::<false, false>(theta, u0, u1),
+        if self.fx.plant_active() {
+            match (noise, chirp) {
+                (true, true) => self.run_interval::<true, true, true>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, true>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, true>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, true>(theta, u0, u1),
+            }
+        } else {
+            match (noise, chirp) {
+                (true, true) => self.run_interval::<true, true, false>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, false>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, false>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, false>(theta, u0, u1),
+            }
         }
+        if self.vib_omega != 0.0 {
+            self.vib_phase = wrap_phase(self.vib_phase + self.vib_omega * self.ts);
+        }
+    }
+
+    /// Moves the simulator to sample `k` with state `z` and reference phase `psi`, the
+    /// lock-in restarted at rest at this instant (for re-running a record from a later
+    /// sample: the lock-in and the modes forget the start within a few tens of ms).
+    pub fn restart_at(&mut self, k: u64, z: [f64; 4], psi: f64) {
+        self.k = k;
+        self.z = z;
+        self.psi = wrap_phase(psi);
+        self.vib_phase = wrap_phase(self.vib_omega * self.time_tau() + self.fx.vib_phase0);
+        let (s, c) = self.psi.sin_cos();
+        self.lpf.start(&mixer_products(z[0], z[2], c, s));
+    }
+
+    /// Adds the plant and measurement effects of `fx` from now on (`vib_omega` = Ω_v/ω0,
+    /// the angular vibration's frequency, with phase `fx.vib_phase0` at τ = 0). Thermal drift and the
+    /// lock-in mismatch are not plant terms: the runner applies them (θ per sample, the
+    /// lock-in cut-off in [`SimConfig::lpf_hz`]).
+    pub fn set_effects(&mut self, fx: Effects, vib_omega: f64) {
+        self.fx = fx;
+        self.vib_omega = if fx.vib_gamma != 0.0 { vib_omega } else { 0.0 };
+        self.vib_phase = wrap_phase(self.vib_omega * self.time_tau() + fx.vib_phase0);
     }
 
     /// The hot loop: `M/m` lock-in blocks of `m` RK4 steps each (`m` = 32 by default).
     #[inline(always)]
-    fn run_interval<const NOISE: bool, const CHIRP: bool>(
+    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: bool>(
         &mut self,
         theta: &Theta,
         u0: &PlantInputs,
@@ -524,43 +628,74 @@ impl GyroSim {
         let q = (qc, qs);
         let psi_k = self.psi;
         let mut z = self.z;
+        let fx = self.fx;
+        // angular vibration γ1·sin(Ω_v τ): its phasor on the same half-step grid
+        let (gv_amp, vo) = (fx.vib_gamma, self.vib_omega);
+        let wv = vo * delta;
+        let vib_phase = self.vib_phase;
+        let meas = |z: &[f64; 4], n: [f64; 2], rc: f64, rs: f64, d: &Drive| {
+            if FX {
+                measure_fx(z, n, d, &fx)
+            } else {
+                measure(z, n, rc, rs, d)
+            }
+        };
         for b in 0..m / blk {
             let j0 = 2 * b * blk; // half-step index of the block start
             let mut ch = Chirp::at(psi_k, w, a, j0, q);
+            let mut vb = Chirp::at(vib_phase, wv, 0.0, j0, (1.0, 0.0));
+            let vib = |r: (f64, f64)| (gv_amp * r.1, gv_amp * vo * r.0);
             let (mut rc, mut rs) = ch.r;
             let jf = j0 as f64;
+            let (gv, gvd) = if FX { vib(vb.r) } else { (0.0, 0.0) };
             let mut da = Drive {
                 cos2psi: rc * rc - rs * rs,
                 s: u0.s + jf * ds,
                 ax: u0.ax + jf * dax,
                 ay: u0.ay + jf * day,
+                gv,
+                gvd,
             };
             for i in 0..blk {
                 if i > 0 {
                     let n = self.noise.draw::<NOISE>();
-                    let [xm, ym] = measure(&z, n, rc, rs, &da);
+                    let [xm, ym] = meas(&z, n, rc, rs, &da);
                     self.lpf.push(&mixer_products(xm, ym, rc, rs));
                 }
                 let (hc, hs) = ch.step::<CHIRP>();
+                let (gv, gvd) = if FX {
+                    vib(vb.step::<false>())
+                } else {
+                    (0.0, 0.0)
+                };
                 let dh = Drive {
                     cos2psi: hc * hc - hs * hs,
                     s: da.s + ds,
                     ax: da.ax + dax,
                     ay: da.ay + day,
+                    gv,
+                    gvd,
                 };
                 (rc, rs) = ch.step::<CHIRP>();
+                let (gv, gvd) = if FX {
+                    vib(vb.step::<false>())
+                } else {
+                    (0.0, 0.0)
+                };
                 let de = Drive {
                     cos2psi: rc * rc - rs * rs,
                     s: dh.s + ds,
                     ax: dh.ax + dax,
                     ay: dh.ay + day,
+                    gv,
+                    gvd,
                 };
-                z = rk4_step(&th, &z, h, &da, &dh, &de);
+                z = rk4_step_g::<FX>(&th, &z, h, &da, &dh, &de, &fx);
                 da = de;
             }
             // block junction sample (also the first sample of the next block)
             let n = self.noise.draw::<NOISE>();
-            let [xm, ym] = measure(&z, n, rc, rs, &da);
+            let [xm, ym] = meas(&z, n, rc, rs, &da);
             self.lpf.finish_block(&mixer_products(xm, ym, rc, rs));
         }
         self.z = z;
@@ -671,6 +806,8 @@ mod tests {
             s: u.s,
             ax: u.ax,
             ay: u.ay,
+            gv: 0.0,
+            gvd: 0.0,
         };
         let mut z = [0.01, 0.0, 0.0, 0.0];
         let mut kept = vec![(z[0], z[2])];
@@ -971,6 +1108,8 @@ mod tests {
                     s: lin(u0.s, u1.s),
                     ax: lin(u0.ax, u1.ax),
                     ay: lin(u0.ay, u1.ay),
+                    gv: 0.0,
+                    gvd: 0.0,
                 }
             };
             for i in 0..m {
@@ -1016,5 +1155,185 @@ mod tests {
         assert_eq!(sim.lockin_block(), 32);
         // 128 steps per period at ω = 1.05: M = ceil(135.716·1.05·128/2π) = 2904 → 2912
         assert_eq!(sim.steps_per_sample(), 2912);
+    }
+
+    /// Each effect's terms in the right-hand side are the EFFECTS.md ones (checked one at
+    /// a time against the formula, at a generic state), and zero sizes give eq. (6) exactly.
+    #[test]
+    fn effect_terms_are_the_documented_ones() {
+        let th = Theta::table2();
+        let z = [1.3, -0.7, 0.4, 0.9];
+        let d = Drive {
+            cos2psi: 0.3,
+            s: 1.1,
+            ax: 0.02,
+            ay: -0.01,
+            gv: 2e-3,
+            gvd: -1e-3,
+        };
+        let base = rhs(
+            &th,
+            &z,
+            &Drive {
+                gv: 0.0,
+                gvd: 0.0,
+                ..d
+            },
+        );
+        assert_eq!(
+            rhs_fx(
+                &th,
+                &z,
+                &Drive {
+                    gv: 0.0,
+                    gvd: 0.0,
+                    ..d
+                },
+                &Effects::default()
+            ),
+            base
+        );
+        let [x, xd, y, yd] = z;
+        let pump = d.s * (1.0 + d.cos2psi);
+        let cases: [(Effects, f64, f64, bool); 7] = [
+            (
+                Effects {
+                    geometric: 1e-3,
+                    ..Effects::default()
+                },
+                -1e-3 * y * (x * y + 2.0 * xd * yd),
+                1e-3 * y * xd * xd,
+                false,
+            ),
+            (
+                Effects {
+                    nl_damping: 1e-3,
+                    ..Effects::default()
+                },
+                -1e-3 * x * x * xd,
+                -1e-3 * y * y * yd,
+                false,
+            ),
+            (
+                Effects {
+                    electrostatic: 1e-3,
+                    ..Effects::default()
+                },
+                0.0,
+                -1e-3 * y * (1.0 + ES_C3 * y * y),
+                false,
+            ),
+            (
+                Effects {
+                    anisodamping: 1e-3,
+                    ..Effects::default()
+                },
+                -0.5e-3 * yd,
+                0.5e-3 * xd,
+                false,
+            ),
+            (
+                Effects {
+                    force_leak: 1e-2,
+                    ..Effects::default()
+                },
+                0.0,
+                1e-2 * pump * x * (th.drive[5] + th.drive[6] * x * x),
+                false,
+            ),
+            (
+                Effects {
+                    quadratic: 1e-3,
+                    ..Effects::default()
+                },
+                -1e-3 * x * x,
+                -1e-3 * y * y,
+                false,
+            ),
+            // angular vibration: γ(τ) enters as +2γY' + γ'Y on the drive, −2γX' − γ'X on the sense
+            (
+                Effects {
+                    vib_gamma: 1.0,
+                    ..Effects::default()
+                },
+                2.0 * d.gv * yd + d.gvd * y,
+                -2.0 * d.gv * xd - d.gvd * x,
+                true,
+            ),
+        ];
+        for (fx, ex, ey, vib) in cases {
+            let dd = if vib {
+                d
+            } else {
+                Drive {
+                    gv: 0.0,
+                    gvd: 0.0,
+                    ..d
+                }
+            };
+            let r = rhs_fx(&th, &z, &dd, &fx);
+            assert!(
+                (r[1] - base[1] - ex).abs() < 1e-15 && (r[3] - base[3] - ey).abs() < 1e-15,
+                "{fx:?}"
+            );
+            assert_eq!((r[0], r[2]), (xd, yd));
+        }
+    }
+
+    /// Feedthrough: with the gyro at rest, the sense pick-off shows C·s on its DC and 2nd
+    /// harmonic channels (V² = V²(1 + cos2ψ): even harmonics only), nothing on the odd ones;
+    /// the readout gain scales the measured Y.
+    #[test]
+    fn feedthrough_signature_at_rest() {
+        let mut sim = GyroSim::new(&quiet(128, 1.05), [0.0; 4]).unwrap();
+        let c = 2e-3;
+        sim.set_effects(
+            Effects {
+                feedthrough: c,
+                ..Effects::default()
+            },
+            0.0,
+        );
+        let u = PlantInputs {
+            ax: 0.0,
+            ay: 0.0,
+            ..PlantInputs::nominal()
+        };
+        run(&mut sim, &th_rest(), &u, 20);
+        let o = sim.lockin();
+        assert!((o.y0 - c).abs() < 1e-6 * c.max(1.0), "{}", o.y0);
+        assert!(
+            (o.y[1].0 - c).abs() < 1e-3 * c && o.y[1].1.abs() < 1e-3 * c,
+            "{:?}",
+            o.y[1]
+        );
+        assert!(o.y[0].0.hypot(o.y[0].1) < 1e-9 && o.y[2].0.hypot(o.y[2].1) < 1e-9);
+        assert!(o.x0.abs() < 1e-12);
+        let mut sim = GyroSim::new(&quiet(128, 1.05), [0.0, 0.0, 0.5, 0.0]).unwrap();
+        let mut ref_sim = sim.clone();
+        sim.set_effects(
+            Effects {
+                readout_gain: 0.01,
+                ..Effects::default()
+            },
+            0.0,
+        );
+        // (the lock-in started at rest on the unscaled Y: let that transient decay)
+        run(&mut sim, &th_rest(), &u, 25);
+        run(&mut ref_sim, &th_rest(), &u, 25);
+        let (a, b) = (sim.lockin().y[0], ref_sim.lockin().y[0]);
+        let tol = 1e-6 * b.0.hypot(b.1);
+        assert!(
+            (a.0 - 1.01 * b.0).abs() < tol && (a.1 - 1.01 * b.1).abs() < tol,
+            "{a:?} {b:?}"
+        );
+    }
+
+    /// Parameters with the pump off (β1 = β3 = 0): the gyro stays at rest.
+    fn th_rest() -> Theta {
+        let mut th = Theta::table2();
+        th.drive[5] = 0.0;
+        th.drive[6] = 0.0;
+        th
     }
 }

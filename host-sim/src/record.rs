@@ -29,10 +29,11 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::effects::Effects;
+use crate::runner::Device;
 use anyhow::Context;
 use paragyro_core::physics::{physical_from_theta, rate_dps_from_gamma};
 use paragyro_core::{Config, Counters, Cplx, Estimator, Lockin, Real, Sample};
-use serde::Serialize;
 use serde_json::{Map, Value, json};
 
 use crate::runner::{self, Precision};
@@ -1034,30 +1035,26 @@ pub fn write_record(path: &Path, rec: &Record) -> anyhow::Result<()> {
 /// Pump voltage amplitude V0 at which s = 1 in simulated records, V.
 pub const SIM_PUMP_AMP_REF_V: f64 = 1.0;
 
-/// A deliberate deviation of the simulated device from the model the core assumes
-/// (`--effect NAME=SIZE`, a later issue). None is implemented yet: [`EFFECTS`] is empty
-/// and [`simulate_record_with`] rejects any.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct EffectSpec {
-    /// The effect's name.
-    pub name: String,
-    /// Its size (in the effect's unit).
-    pub size: f64,
-}
-
-/// Names of the implemented effects.
-pub const EFFECTS: [&str; 0] = [];
+pub use crate::effects::EffectSpec;
 
 /// Options of a simulated record.
 #[derive(Clone, Debug, Default)]
 pub struct RecordOptions {
     /// Overrides the scenario's noise seed.
     pub seed: Option<u64>,
-    /// Effects added to the simulated device (none implemented yet).
+    /// Effects added to the simulated device ([`crate::effects`]).
     pub effects: Vec<EffectSpec>,
+    /// Die temperature `(start °C, rise K over the run)`, written as `temp_c` (with a
+    /// 0.01 K sensor resolution); `None`: no temperature column, unless the thermal drift
+    /// is added, which then gets the default 25 °C + 5 K.
     /// A rate table is present: write the scenario's true rate as `rate_ref_dps`.
     pub rate_table: bool,
+    /// Die temperature profile (see above).
+    pub temp: Option<(f64, f64)>,
 }
+
+/// Temperature profile of a record with thermal drift but no profile given: 25 °C + 5 K.
+pub const DEFAULT_TEMP_PROFILE: (f64, f64) = (25.0, 5.0);
 
 /// A simulated record of a scenario (main run, no twin) and its truth; see
 /// [`simulate_record_with`].
@@ -1082,21 +1079,12 @@ pub fn simulate_record_with(
     opts: &RecordOptions,
     progress: &mut dyn FnMut(f64),
 ) -> anyhow::Result<(Record, Value)> {
-    if let Some(e) = opts
-        .effects
-        .iter()
-        .find(|e| !EFFECTS.contains(&e.name.as_str()))
-    {
-        anyhow::bail!(
-            "unknown effect '{}' (implemented effects: {})",
-            e.name,
-            if EFFECTS.is_empty() {
-                "none yet".to_string()
-            } else {
-                EFFECTS.join(", ")
-            }
-        );
-    }
+    let gamma_per_dps = paragyro_core::physics::gamma_from_rate_dps(1.0, sc.omega0_rad_s());
+    let effects = Effects::from_specs(&opts.effects, gamma_per_dps).map_err(anyhow::Error::msg)?;
+    let temp = opts
+        .temp
+        .or((effects.tcf_ppm_k != 0.0).then_some(DEFAULT_TEMP_PROFILE));
+    let dev = Device { effects, temp };
     let cfg = runner::core_config(sc);
     let mut est: Estimator<f64> = cfg
         .build()
@@ -1107,9 +1095,10 @@ pub fn simulate_record_with(
     let pump_centre_initial_hz = est.pump_centre_hz();
     let mut last_progress = Instant::now();
     // the runner's closed loop: the record holds exactly what the core was given
-    runner::closed_loop(
+    runner::closed_loop_with(
         sc,
         seed,
+        &dev,
         &mut est,
         |_| {},
         |ls| {
@@ -1124,7 +1113,7 @@ pub fn simulate_record_with(
                 x_um: li.x,
                 y0_um: li.y0,
                 y_um: li.y,
-                temp_c: None,
+                temp_c: temp.map(|_| (dev.temp_c(ls.t_s, sc.duration_s) * 100.0).round() / 100.0),
                 rate_ref_dps: opts.rate_table.then_some(ls.plant.rate_dps),
             });
             if ls.k % 50 == 0 && last_progress.elapsed().as_millis() >= 100 {

@@ -206,7 +206,7 @@ fn write_csv(path: &Path, rows: &[TraceRow]) -> Result<()> {
 // Plot helpers
 // ---------------------------------------------------------------------------------------------
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub(crate) type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 fn ensure_fonts() {
     static FONTS: Once = Once::new();
@@ -218,7 +218,7 @@ fn ensure_fonts() {
 }
 
 /// A figure: white canvas with the title; returns the root and the area below the title.
-fn figure<'a>(path: &'a Path, title: &str) -> Result<(Area<'a>, Area<'a>)> {
+pub(crate) fn figure<'a>(path: &'a Path, title: &str) -> Result<(Area<'a>, Area<'a>)> {
     ensure_fonts();
     let root = BitMapBackend::new(path, (FIG_W, FIG_H)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -255,16 +255,16 @@ const TRUE_COLOR: RGBColor = RGBColor(20, 20, 20);
 const EVENT_COLOR: RGBColor = RGBColor(150, 150, 150);
 
 /// One polyline of a panel.
-struct Line {
-    pts: Vec<(f64, f64)>,
-    color: RGBColor,
-    width: u32,
-    dashed: bool,
-    label: Option<String>,
+pub(crate) struct Line {
+    pub(crate) pts: Vec<(f64, f64)>,
+    pub(crate) color: RGBColor,
+    pub(crate) width: u32,
+    pub(crate) dashed: bool,
+    pub(crate) label: Option<String>,
 }
 
 impl Line {
-    fn new(pts: Vec<(f64, f64)>, color: RGBColor, width: u32) -> Self {
+    pub(crate) fn new(pts: Vec<(f64, f64)>, color: RGBColor, width: u32) -> Self {
         Line {
             pts,
             color,
@@ -273,44 +273,44 @@ impl Line {
             label: None,
         }
     }
-    fn dashed(mut self) -> Self {
+    pub(crate) fn dashed(mut self) -> Self {
         self.dashed = true;
         self
     }
-    fn label(mut self, l: impl Into<String>) -> Self {
+    pub(crate) fn label(mut self, l: impl Into<String>) -> Self {
         self.label = Some(l.into());
         self
     }
 }
 
 /// A shaded time interval.
-struct Band {
-    x0: f64,
-    x1: f64,
-    color: RGBAColor,
+pub(crate) struct Band {
+    pub(crate) x0: f64,
+    pub(crate) x1: f64,
+    pub(crate) color: RGBAColor,
 }
 
 /// Everything one panel shows.
-struct Panel {
-    caption: String,
-    x: (f64, f64),
-    y: (f64, f64),
-    x_desc: Option<String>,
-    y_desc: String,
-    y_fmt: fn(f64) -> String,
-    lines: Vec<Line>,
+pub(crate) struct Panel {
+    pub(crate) caption: String,
+    pub(crate) x: (f64, f64),
+    pub(crate) y: (f64, f64),
+    pub(crate) x_desc: Option<String>,
+    pub(crate) y_desc: String,
+    pub(crate) y_fmt: fn(f64) -> String,
+    pub(crate) lines: Vec<Line>,
     /// Horizontal reference lines (value, colour, legend label).
-    hlines: Vec<(f64, RGBColor, String)>,
+    pub(crate) hlines: Vec<(f64, RGBColor, String)>,
     /// Event times (dashed vertical lines).
-    vlines: Vec<f64>,
-    bands: Vec<Band>,
+    pub(crate) vlines: Vec<f64>,
+    pub(crate) bands: Vec<Band>,
     /// Legend entries for the bands.
-    band_labels: Vec<(String, RGBAColor)>,
-    legend: Option<SeriesLabelPosition>,
+    pub(crate) band_labels: Vec<(String, RGBAColor)>,
+    pub(crate) legend: Option<SeriesLabelPosition>,
 }
 
 impl Panel {
-    fn new(caption: String, x: (f64, f64), y: (f64, f64)) -> Self {
+    pub(crate) fn new(caption: String, x: (f64, f64), y: (f64, f64)) -> Self {
         Panel {
             caption,
             x,
@@ -329,7 +329,7 @@ impl Panel {
 }
 
 /// Axis tick label: compact, enough digits for a zoomed axis.
-fn fmt_tick(v: f64) -> String {
+pub(crate) fn fmt_tick(v: f64) -> String {
     let a = v.abs();
     if v == 0.0 {
         "0".into()
@@ -375,7 +375,7 @@ fn segments(pts: &[(f64, f64)], y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
     out
 }
 
-fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
+pub(crate) fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
     let (x0, x1) = p.x;
     let (y0, y1) = p.y;
     let mut chart = ChartBuilder::on(area)
@@ -547,7 +547,7 @@ fn settle_time(trace: &[TraceRow]) -> f64 {
 }
 
 /// Finite values' (min, max).
-fn min_max(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+pub(crate) fn min_max(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     let (lo, hi) = v
         .filter(|x| x.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {

@@ -13,6 +13,7 @@ use paragyro_core::physics::{Physical, physical_from_theta};
 use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample, StepOutput};
 use serde_json::{Map, Value, json};
 
+use crate::effects::Effects;
 use crate::lockin::LockinOut;
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use crate::scenario::{EventKind, EventSpec, PlantAt, PumpProfileSpec, Scenario};
@@ -204,24 +205,63 @@ pub fn closed_loop<T: Real>(
     sc: &Scenario,
     seed: u64,
     est: &mut Estimator<T>,
+    on_control: impl FnMut(&EventSpec),
+    visit: impl FnMut(&LoopSample<'_, T>),
+) -> anyhow::Result<()> {
+    closed_loop_with(sc, seed, &Device::default(), est, on_control, visit)
+}
+
+/// How the simulated device departs from the scenario's eq. (6): the effects of
+/// [`crate::effects`] and the die temperature over the run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Device {
+    /// The effects (all zero: the nominal model).
+    pub effects: Effects,
+    /// Die temperature: `None` (not recorded, and the thermal drift sees 25 °C), or
+    /// `(start °C, rise K over the run)`, linear.
+    pub temp: Option<(f64, f64)>,
+}
+
+impl Device {
+    /// Die temperature at `t_s` of a run of `duration_s` (25 °C without a profile).
+    pub fn temp_c(&self, t_s: f64, duration_s: f64) -> f64 {
+        match self.temp {
+            Some((t0, rise)) => t0 + rise * (t_s / duration_s.max(1e-9)).clamp(0.0, 1.0),
+            None => crate::effects::T_REF_C,
+        }
+    }
+}
+
+/// [`closed_loop`] for a device with effects ([`Device`]): the plant and its measurement
+/// get the effect terms, the lock-in its cut-off error, θ the thermal drift at the die
+/// temperature of each sample.
+pub fn closed_loop_with<T: Real>(
+    sc: &Scenario,
+    seed: u64,
+    dev: &Device,
+    est: &mut Estimator<T>,
     mut on_control: impl FnMut(&EventSpec),
     mut visit: impl FnMut(&LoopSample<'_, T>),
 ) -> anyhow::Result<()> {
     let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
     let fs = est.config().fs_hz;
+    let fx = dev.effects;
     let simcfg = SimConfig {
         omega0_rad_s: w0,
         fs_hz: fs,
         steps_per_period: sc.sim.steps_per_period,
         omega_max: omega_max(sc, est.config()),
         lpf_order: sc.sim.lockin_lpf_order,
-        lpf_hz: sc.sim.lockin_lpf_hz,
+        lpf_hz: sc.sim.lockin_lpf_hz * (1.0 + fx.lockin_mismatch),
         noise_density: sc.sim.noise_pm_rthz * 1e-6,
         seed,
     };
     let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
     let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    // the vibration sits `beat` above the pump frequency the run starts at
+    let vib_omega = std::f64::consts::TAU * (est.initial_pump_hz() + fx.vib_beat_hz) / w0;
+    sim.set_effects(fx, vib_omega);
     let n = (sc.duration_s * fs).round() as u64;
     let accel_si = L0_M * w0 * w0;
     let controls = sc.control_events();
@@ -286,10 +326,21 @@ pub fn closed_loop<T: Real>(
             break;
         }
         let pa1 = sc.plant_at(t_next);
-        let theta = Theta {
+        let mut theta = Theta {
             drive: pa.theta_drive,
             sense: pa.theta_sense,
         };
+        if fx.tcf_ppm_k != 0.0 {
+            // the die temperature over the interval, at its midpoint
+            let tc = dev.temp_c(0.5 * (t + t_next), sc.duration_s);
+            fx.thermal_theta(
+                &mut theta.drive,
+                &mut theta.sense,
+                pa.phys[3],
+                pa.phys[4],
+                tc,
+            );
+        }
         let u1 = PlantInputs {
             omega: out.pump_hz_next / (2.0 * f0),
             s: sc.pump_scale_at(t_next) * out.pump_scale_next,

@@ -35,7 +35,7 @@ pub const L0_M: f64 = 1e-6;
 pub const DEFAULT_F0_HZ: f64 = 2.618 / 3.8581e-5 / (2.0 * PI);
 
 /// The built-in scenarios: (name, one-line description, embedded TOML, file name).
-const BUILTINS: [(&str, &str, &str, &str); 4] = [
+const BUILTINS: [(&str, &str, &str, &str); 5] = [
     (
         "identify",
         "Start-up, 0.5 s gate, pump dither from 1 s: identify all 14 θ from a nominal design 3–10 % off (10 s)",
@@ -59,6 +59,12 @@ const BUILTINS: [(&str, &str, &str, &str); 4] = [
         "The paper's \"sense amplitude drops to 20 %\": pump fixed at 2·√1.0265·f0, ωy² = 1.0265 vs 1.03 twin (2 s)",
         include_str!("../scenarios/paper-claim.toml"),
         "paper-claim.toml",
+    ),
+    (
+        "characterise",
+        "Sim-to-real diagnosis run: dither from 1 s, pump amplitude steps s = 1 → 0.85 → 1.15 (20 s)",
+        include_str!("../scenarios/characterise.toml"),
+        "characterise.toml",
     ),
 ];
 
@@ -2255,7 +2261,7 @@ mod tests {
     #[test]
     fn every_builtin_loads_and_validates() {
         let names = Scenario::builtin_names();
-        assert_eq!(names.len(), 4);
+        assert_eq!(names.len(), 5);
         for (name, desc) in names {
             let text = BUILTINS.iter().find(|b| b.0 == name).unwrap().2;
             let s = match Scenario::from_toml_str(text, name) {

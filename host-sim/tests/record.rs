@@ -780,11 +780,12 @@ fn truth_path_naming() {
 }
 
 #[test]
-fn effects_are_not_implemented_yet() {
+fn unknown_effects_are_rejected_and_known_ones_recorded() {
     let opts = RecordOptions {
         effects: vec![EffectSpec {
             name: "drive_feedthrough".into(),
             size: 0.1,
+            param: None,
         }],
         ..RecordOptions::default()
     };
@@ -793,6 +794,15 @@ fn effects_are_not_implemented_yet() {
         e.to_string().contains("unknown effect 'drive_feedthrough'"),
         "{e}"
     );
+    // a thermal drift without a temperature profile gets the default one, in temp_c
+    let opts = RecordOptions {
+        effects: vec!["thermal_drift=-30".parse().unwrap()],
+        ..RecordOptions::default()
+    };
+    let (rec, truth) = simulate_record_with(&identify(0.1), &opts, &mut |_| {}).unwrap();
+    assert!(rec.rows.iter().all(|r| r.temp_c.is_some()));
+    assert_eq!(truth["effects"][0]["name"], "thermal_drift");
+    assert_eq!(truth["effects"][0]["size"], -30.0);
 }
 
 #[test]
