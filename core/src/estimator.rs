@@ -275,7 +275,7 @@ pub struct Estimator<T: Real> {
     th24n: T,
     settle: SettleTest,
     sched: Scheduler<T>,
-    sup: Supervisor,
+    sup: Supervisor<T>,
     // state
     k: u64,
     jump_gate_until: u64,
@@ -287,7 +287,6 @@ pub struct Estimator<T: Real> {
     last_good: Option<(Envelopes<T>, [T; 2], f64, T)>,
     health: Health,
     counters: Counters,
-    last_drive_amp: f64,
     /// Mean pump voltage scale (EWMA over ~1 s).
     last_s: T,
     last_relin: u64,
@@ -297,6 +296,7 @@ pub struct Estimator<T: Real> {
 impl<T: Real> Estimator<T> {
     /// Builds from a configuration that passed [`Config::validate`] (use
     /// [`Config::build`]).
+    #[inline(always)] // built in its caller's destination (stack, docs/firmware.md)
     pub(crate) fn from_valid_config(cfg: &Config) -> Self {
         let omega0 = cfg.omega0_rad_s();
         let ts = omega0 / cfg.fs_hz; // sample period in τ
@@ -320,7 +320,12 @@ impl<T: Real> Estimator<T> {
             w1[r] = T::from_f64(1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz));
             w2[r] = T::from_f64(1.0 / (cfg.row_sigma_sense[r] * cfg.noise_pm_rthz));
         }
-        let samples = |s: f64| libm::round(s * cfg.fs_hz).max(0.0) as u64;
+        // out of line: inlined at its nine uses it was ~1 KB of the firmware image
+        #[inline(never)]
+        fn samples_at(s: f64, fs_hz: f64) -> u64 {
+            libm::round(s * fs_hz).max(0.0) as u64
+        }
+        let samples = |s: f64| samples_at(s, cfg.fs_hz);
         let r = &cfg.rls;
         let set1 = RlsSettings {
             forgetting: T::from_f64(r.forgetting),
@@ -407,7 +412,6 @@ impl<T: Real> Estimator<T> {
             last_good: None,
             health: Health::default(),
             counters: Counters::default(),
-            last_drive_amp: 0.0,
             last_s: T::ONE,
             last_relin: 0,
             relins: 0,
@@ -602,6 +606,13 @@ impl<T: Real> Estimator<T> {
         let t24 = self.th24n + self.sc2[3] * x2[3];
         let g = (t14 - t24) * T::from_f64(0.25);
         -t22 + g * g
+    }
+
+    /// θ̂1 in `T` (the retune's drive band on the tick path; `theta()` is the `f64`
+    /// value, the same sums in `f64`).
+    fn theta1_t(&self) -> [T; 8] {
+        let x1 = self.rls1.estimate();
+        core::array::from_fn(|j| T::from_f64(self.th1n[j]) + self.sc1[j] * x1[j])
     }
 
     /// Estimated ω_y² (non-dimensional).
@@ -832,8 +843,7 @@ impl<T: Real> Estimator<T> {
             && tr2 <= lim2
             && self.rls1.min_d() > T::ZERO
             && self.rls2.min_d() > T::ZERO;
-        let drive_amp = env.a[0].abs().to_f64();
-        self.last_drive_amp = drive_amp;
+        let drive_amp = env.a[0].abs();
         // mean pump scale (1 s EWMA): the amplitude dither must not make the band guard
         // wobble with the instantaneous s
         self.last_s += self.s_alpha * (pscale - self.last_s);
@@ -850,14 +860,18 @@ impl<T: Real> Estimator<T> {
 
         // ---- retune supervisor
         let centre_om = self.om_ref + self.sched.centre();
-        // retune decisions at 20 Hz (every 25 samples): plenty for a move of ≥ 0.5 s,
-        // and the f64 work stays off most ticks; lock tracking and ramps run every tick
+        // retune decisions at 20 Hz (every 25 samples): plenty for a move of ≥ 0.5 s;
+        // lock tracking and ramps run every tick. The decision is in T (module retune).
         let decide = k.is_multiple_of(25);
         let healthy = decide && health.actionable() && k >= self.bad_gate_until;
-        let wy2 = if decide { wy2.to_f64() } else { 0.0 };
-        // the band (three f64 square roots) only when a retune is actually in view
-        let band = if self.sup.would_retune(k, healthy, wy2, centre_om) {
-            drive_band(&self.theta().0, self.last_s.to_f64())
+        let wy2 = if decide { wy2 } else { T::ZERO };
+        // the band (three square roots) only when a retune is actually in view
+        let band = if decide
+            && self
+                .sup
+                .would_retune(k, healthy, wy2, T::from_f64(centre_om))
+        {
+            drive_band(&self.theta1_t(), self.last_s)
         } else {
             None
         };
@@ -908,6 +922,21 @@ impl<T: Real> Estimator<T> {
 mod tests {
     extern crate std;
     use super::*;
+
+    #[test]
+    fn validated_build_and_initial_pump_match_build() {
+        let cfg = Config::table2();
+        let a = cfg.build::<f32>().unwrap();
+        let b = cfg.validated().unwrap().build::<f32>();
+        assert_eq!(std::format!("{a:?}"), std::format!("{b:?}"));
+        assert_eq!(
+            cfg.initial_pump_hz().to_bits(),
+            a.initial_pump_hz().to_bits()
+        );
+        let mut bad = cfg;
+        bad.fs_hz = f64::NAN;
+        assert_eq!(bad.validated().unwrap_err().field, "fs_hz");
+    }
     use crate::config::Config;
 
     /// A plausible steady sample of the Table 2 gyro with a little variation (so that no

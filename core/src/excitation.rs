@@ -36,8 +36,23 @@ impl Ramp {
         if i >= self.len {
             return self.to;
         }
-        let x = i as f64 / self.len as f64;
-        let w = 0.5 - 0.5 * libm::cos(core::f64::consts::PI * x);
+        let w = f64::half_cos(f64::ratio(i, self.len));
+        self.from + (self.to - self.from) * w
+    }
+
+    /// [`Ramp::at`] with the raised-cosine weight in `T` (the scheduler's precision:
+    /// in `f32` the weight needs no soft-float `f64` cosine; the centre stays `f64`).
+    /// Equal to `at` for `f64`.
+    #[inline]
+    pub fn at_in<T: Real>(&self, k: u64) -> f64 {
+        if k <= self.k0 {
+            return self.from;
+        }
+        let i = k - self.k0;
+        if i >= self.len {
+            return self.to;
+        }
+        let w = T::half_cos(T::ratio(i, self.len)).to_f64();
         self.from + (self.to - self.from) * w
     }
     /// Finished at sample `k`.
@@ -68,9 +83,9 @@ pub struct Scheduler<T> {
     scale_cmd: T,
 }
 
-/// (cos, sin) of `a` (design time, f64).
+/// (cos, sin) of `a` (design time).
 fn rot<T: Real>(a: f64) -> (T, T) {
-    (T::from_f64(libm::cos(a)), T::from_f64(libm::sin(a)))
+    T::design_cos_sin(a)
 }
 
 /// Rotates the unit phasor `z` by `r` and renormalises it to first order (a sine
@@ -181,7 +196,7 @@ impl<T: Real> Scheduler<T> {
     /// dither phase and taper by one sample. Call once per sample, in order.
     pub fn command(&mut self, k: u64) -> f64 {
         if let Some(r) = self.ramp {
-            self.centre = r.at(k);
+            self.centre = r.at_in::<T>(k);
             if r.done(k) {
                 self.ramp = None;
             }
@@ -192,13 +207,12 @@ impl<T: Real> Scheduler<T> {
         } else {
             self.env = (self.env - self.env_step).max(T::ZERO);
         }
-        let half = T::from_f64(0.5);
         let mut d = T::ZERO;
         self.scale_cmd = T::ONE;
         if self.env > T::ZERO {
             // raised-cosine taper, only while tapering
             let shape = if self.env < T::ONE {
-                half - half * (T::from_f64(core::f64::consts::PI) * self.env).cos()
+                T::half_cos(self.env)
             } else {
                 T::ONE
             };

@@ -31,6 +31,7 @@ pub struct SynthTables<T> {
 
 impl<T: Real> SynthTables<T> {
     /// Builds the tables (design time).
+    #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new() -> Self {
         let mut t = SynthTables {
             c1: [T::ZERO; NSYN],
@@ -42,12 +43,9 @@ impl<T: Real> SynthTables<T> {
         };
         for j in 0..NSYN {
             let ph = 2.0 * core::f64::consts::PI * j as f64 / NSYN as f64;
-            t.c1[j] = T::from_f64(libm::cos(ph));
-            t.s1[j] = T::from_f64(libm::sin(ph));
-            t.c2[j] = T::from_f64(libm::cos(2.0 * ph));
-            t.s2[j] = T::from_f64(libm::sin(2.0 * ph));
-            t.c3[j] = T::from_f64(libm::cos(3.0 * ph));
-            t.s3[j] = T::from_f64(libm::sin(3.0 * ph));
+            (t.c1[j], t.s1[j]) = T::design_cos_sin(ph);
+            (t.c2[j], t.s2[j]) = T::design_cos_sin(2.0 * ph);
+            (t.c3[j], t.s3[j]) = T::design_cos_sin(3.0 * ph);
         }
         t
     }

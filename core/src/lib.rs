@@ -31,7 +31,7 @@ pub mod rows;
 pub mod svf;
 
 pub use complex::Cplx;
-pub use config::{Config, ConfigError};
+pub use config::{Config, ConfigError, ValidConfig};
 pub use estimator::{Counters, Estimator, Health, Lockin, Sample, StepOutput};
 pub use physics::Physical;
 pub use real::Real;

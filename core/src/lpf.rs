@@ -38,7 +38,15 @@ pub struct Analog {
 
 /// Analog Butterworth low-pass of order `n` (1..=8) and cut-off `wc` (rad per time
 /// unit), unit DC gain, as a cascade of scaled sections.
+#[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
 pub fn butterworth(n: usize, wc: f64) -> Analog {
+    butterworth_with(n, wc, libm::sin)
+}
+
+/// [`butterworth`] with the sine of the pole angles from `sin` (the design precision's
+/// [`Real::design_cos_sin_f64`], so that the `f32` design links no libm trigonometry).
+#[inline(never)] // set-up only
+pub fn butterworth_with(n: usize, wc: f64, sin: fn(f64) -> f64) -> Analog {
     let mut a = [[0.0; MAX_ORDER]; MAX_ORDER];
     let mut b = [0.0; MAX_ORDER];
     let mut c = [0.0; MAX_ORDER];
@@ -50,7 +58,7 @@ pub fn butterworth(n: usize, wc: f64) -> Analog {
     let pairs = n / 2;
     for k in 1..=pairs {
         // damping of the k-th conjugate pole pair
-        let zeta = libm::sin(core::f64::consts::PI * (2 * k - 1) as f64 / (2 * n) as f64);
+        let zeta = sin(core::f64::consts::PI * (2 * k - 1) as f64 / (2 * n) as f64);
         let (q, r) = (idx, idx + 1);
         idx += 2;
         // q' = wc r ; r' = wc (u_in - q - 2 zeta r)
@@ -82,6 +90,7 @@ pub fn butterworth(n: usize, wc: f64) -> Analog {
 
 /// Matrix exponential of an `m × m` block of `x` (m ≤ 10) by scaling and squaring
 /// with a 20-term Taylor series. Design-time only (`f64`).
+#[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
 pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
     let m = m.min(MAXAUG);
     // infinity norm
@@ -165,6 +174,7 @@ pub struct FohDiscrete {
 
 /// Discretises `sys` with a first-order hold (augmented matrix exponential, as in
 /// `svf_discrete` of the prototype).
+#[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
 pub fn foh_discretise(sys: &Analog, ts: f64) -> FohDiscrete {
     let n = sys.n;
     let mut m = [[0.0; MAXAUG]; MAXAUG];
@@ -207,8 +217,9 @@ pub struct ReplicaCoeffs<T> {
 impl<T: Real> ReplicaCoeffs<T> {
     /// Designs the replica of an order-`order` Butterworth with cut-off `wc` (rad per
     /// time unit), sampled every `ts` time units.
+    #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn butterworth(order: usize, wc: f64, ts: f64) -> Self {
-        let sys = butterworth(order, wc);
+        let sys = butterworth_with(order, wc, |a| T::design_cos_sin_f64(a).1);
         let d = foh_discretise(&sys, ts);
         let mut r = ReplicaCoeffs {
             n: d.n,

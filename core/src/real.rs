@@ -57,6 +57,94 @@ pub trait Real:
     fn min(self, o: Self) -> Self {
         if self < o { self } else { o }
     }
+    /// (cos a, sin a) in `f64` of a design-time angle (|a| < 1e6) for a design in this
+    /// precision. `f64`: libm, as always. `f32`: a compact evaluation (fdlibm's kernels
+    /// after a two-part π/2 reduction, within ~1 `f64` ulp), which rounds to the same
+    /// `f32` design as libm (tested) without linking libm's `f64` trigonometry (≈ 6.5 KB
+    /// with its large-argument reduction) into the firmware.
+    fn design_cos_sin_f64(a: f64) -> (f64, f64);
+    /// e^x in `f64` for a design in this precision (as `design_cos_sin_f64`: libm for
+    /// `f64`, a compact evaluation for `f32` that rounds to the same `f32` design).
+    fn design_exp_f64(x: f64) -> f64;
+    /// [`Real::design_cos_sin_f64`] rounded to `Self`.
+    #[inline]
+    fn design_cos_sin(a: f64) -> (Self, Self) {
+        let (c, s) = Self::design_cos_sin_f64(a);
+        (Self::from_f64(c), Self::from_f64(s))
+    }
+    /// The raised-cosine weight `0.5 − 0.5·cos(πx)` for `x` in [0, 1] (ramps, tapers).
+    /// `f64`: with libm's `cos`, as always; `f32`: `sin²(πx/2)` by its series in `f32`
+    /// (within a few `f32` ulps; libm's `cosf` evaluates in `f64`, soft-float on the M4F).
+    fn half_cos(x: Self) -> Self;
+    /// `num / den` in `Self` (`den` > 0; counts below 2²⁴ are exact in `f32`).
+    fn ratio(num: u64, den: u64) -> Self;
+}
+
+/// e^x in `f64`: x = n·ln2 + r with a two-part ln2 (|r| ≤ ln2/2), a Taylor series of
+/// e^r to r¹⁶ (truncation < 1e-17), scaled by 2ⁿ. Within a few `f64` ulps.
+fn exp_f64(x: f64) -> f64 {
+    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
+    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+    if x.is_nan() {
+        return x;
+    }
+    if x > 709.0 {
+        return f64::INFINITY;
+    }
+    if x < -745.0 {
+        return 0.0;
+    }
+    let n = libm::round(x * core::f64::consts::LOG2_E);
+    let r = (x - n * LN2_HI) - n * LN2_LO;
+    let mut sum = 1.0;
+    let mut term = 1.0;
+    for k in 1..=16 {
+        term *= r / k as f64;
+        sum += term;
+    }
+    // 2ⁿ in two steps (n down to −1075 would underflow a single power)
+    let n = n as i64;
+    let (n1, n2) = (n / 2, n - n / 2);
+    let p = |m: i64| f64::from_bits(((m + 1023) as u64) << 52);
+    sum * p(n1) * p(n2)
+}
+
+/// (cos x, sin x) in `f64` for moderate |x| (< 1e6): x = nπ/2 + r with a two-part π/2,
+/// then fdlibm's `__kernel_cos`/`__kernel_sin` polynomials on |r| ≤ π/4.
+pub(crate) fn cos_sin_f64(x: f64) -> (f64, f64) {
+    const PIO2_HI: f64 = 1.570_796_326_734_125_614_17e0;
+    const PIO2_LO: f64 = 6.077_100_506_506_192_249_32e-11;
+    const S: [f64; 6] = [
+        -1.666_666_666_666_663_243_48e-1,
+        8.333_333_333_322_489_461_24e-3,
+        -1.984_126_982_985_794_931_34e-4,
+        2.755_731_370_707_006_767_89e-6,
+        -2.505_076_025_340_686_341_95e-8,
+        1.589_690_995_211_550_102_21e-10,
+    ];
+    const C: [f64; 6] = [
+        4.166_666_666_666_660_190_37e-2,
+        -1.388_888_888_887_410_957_49e-3,
+        2.480_158_728_947_672_941_78e-5,
+        -2.755_731_435_139_066_330_35e-7,
+        2.087_572_321_298_174_827_90e-9,
+        -1.135_964_755_778_819_482_65e-11,
+    ];
+    let n = libm::round(x * core::f64::consts::FRAC_2_PI);
+    let r = (x - n * PIO2_HI) - n * PIO2_LO;
+    let z = r * r;
+    let ps = S[1] + z * (S[2] + z * (S[3] + z * (S[4] + z * S[5])));
+    let sin_r = r + r * z * (S[0] + z * ps);
+    let pc = C[0] + z * (C[1] + z * (C[2] + z * (C[3] + z * (C[4] + z * C[5]))));
+    let hz = 0.5 * z;
+    let w = 1.0 - hz;
+    let cos_r = w + (((1.0 - w) - hz) + z * z * pc);
+    match (n as i64) & 3 {
+        0 => (cos_r, sin_r),
+        1 => (-sin_r, cos_r),
+        2 => (-cos_r, -sin_r),
+        _ => (sin_r, -cos_r),
+    }
 }
 
 impl Real for f32 {
@@ -92,6 +180,39 @@ impl Real for f32 {
     fn cos(self) -> Self {
         libm::cosf(self)
     }
+    fn design_cos_sin_f64(a: f64) -> (f64, f64) {
+        cos_sin_f64(a)
+    }
+    fn design_exp_f64(x: f64) -> f64 {
+        exp_f64(x)
+    }
+    #[inline]
+    fn half_cos(x: Self) -> Self {
+        // exact at the ends (and for x outside [0, 1], NaN → 0)
+        if x >= 1.0 {
+            return 1.0;
+        }
+        let x = if x > 0.0 { x } else { 0.0 };
+        // sin(t), t = πx/2 in [0, π/2]: Taylor series to t¹⁵ (truncation < 1e-9)
+        let t = core::f32::consts::FRAC_PI_2 * x;
+        let z = t * t;
+        let p = 1.0 / 1_307_674_368_000.0;
+        let p = p * z - 1.0 / 6_227_020_800.0;
+        let p = p * z + 1.0 / 39_916_800.0;
+        let p = p * z - 1.0 / 362_880.0;
+        let p = p * z + 1.0 / 5_040.0;
+        let p = p * z - 1.0 / 120.0;
+        let p = p * z + 1.0 / 6.0;
+        let s = t - t * z * p;
+        s * s
+    }
+    #[inline]
+    fn ratio(num: u64, den: u64) -> Self {
+        match (u32::try_from(num), u32::try_from(den)) {
+            (Ok(n), Ok(d)) => n as f32 / d as f32,
+            _ => (num as f64 / den as f64) as f32,
+        }
+    }
 }
 
 impl Real for f64 {
@@ -126,5 +247,97 @@ impl Real for f64 {
     #[inline]
     fn cos(self) -> Self {
         libm::cos(self)
+    }
+    fn design_cos_sin_f64(a: f64) -> (f64, f64) {
+        (libm::cos(a), libm::sin(a))
+    }
+    fn design_exp_f64(x: f64) -> f64 {
+        libm::exp(x)
+    }
+    #[inline]
+    fn half_cos(x: Self) -> Self {
+        0.5 - 0.5 * libm::cos(core::f64::consts::PI * x)
+    }
+    #[inline]
+    fn ratio(num: u64, den: u64) -> Self {
+        num as f64 / den as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    #[test]
+    fn compact_design_trig_rounds_like_libm() {
+        // every design angle of the core (synthesis tables, Butterworth poles, dither
+        // rotations) and a dense sweep: the f32 design equals libm's rounded to f32
+        let mut n = 0;
+        let mut worst: f64 = 0.0;
+        for i in -200_000..=200_000 {
+            let a = i as f64 * 1e-4;
+            let (c, s) = cos_sin_f64(a);
+            worst = worst
+                .max((c - libm::cos(a)).abs())
+                .max((s - libm::sin(a)).abs());
+            if c as f32 != libm::cos(a) as f32 || s as f32 != libm::sin(a) as f32 {
+                n += 1;
+            }
+        }
+        assert!(worst < 4.5e-16, "f64 error {worst}");
+        assert_eq!(n, 0, "{n} angles round differently");
+        for j in 0..32 {
+            for m in 1..=3 {
+                let a = m as f64 * 2.0 * core::f64::consts::PI * j as f64 / 32.0;
+                assert_eq!(
+                    f32::design_cos_sin(a),
+                    (libm::cos(a) as f32, libm::sin(a) as f32)
+                );
+            }
+        }
+        for order in 1..=8usize {
+            for k in 1..=order / 2 {
+                let a = core::f64::consts::PI * (2 * k - 1) as f64 / (2 * order) as f64;
+                assert_eq!(f32::design_cos_sin_f64(a).1 as f32, libm::sin(a) as f32);
+            }
+        }
+    }
+
+    #[test]
+    fn compact_design_exp_rounds_like_libm() {
+        let mut worst: f64 = 0.0;
+        for i in -100_000..=100_000 {
+            let x = i as f64 * 1e-4;
+            let e = exp_f64(x);
+            worst = worst.max(((e - libm::exp(x)) / libm::exp(x)).abs());
+            assert_eq!(e as f32, libm::exp(x) as f32, "x = {x}");
+        }
+        assert!(worst < 1e-15, "{worst}");
+        // the SVF corners 2π·svf_hz/fs_hz up to the largest allowed, fs/10
+        for i in 1..=1000 {
+            let h = -2.0 * core::f64::consts::PI * (i as f64 / 10_000.0);
+            assert_eq!(exp_f64(h) as f32, libm::exp(h) as f32);
+        }
+        assert_eq!(exp_f64(0.0), 1.0);
+        assert_eq!(exp_f64(-800.0), 0.0);
+        assert!(exp_f64(800.0).is_infinite() && exp_f64(f64::NAN).is_nan());
+        assert!((exp_f64(-700.0) / libm::exp(-700.0) - 1.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn half_cos_f32_is_the_raised_cosine() {
+        let mut worst: f64 = 0.0;
+        for i in 0..=10_000u64 {
+            let x = f32::ratio(i, 10_000);
+            let want = f64::half_cos(x as f64);
+            worst = worst.max((f32::half_cos(x) as f64 - want).abs());
+        }
+        assert!(worst < 2e-7, "{worst}");
+        assert_eq!(f32::half_cos(0.0), 0.0);
+        assert_eq!(f32::half_cos(1.0), 1.0);
+        assert_eq!(f32::half_cos(-1.0), 0.0);
+        assert_eq!(f32::half_cos(2.0), 1.0);
+        assert_eq!(f64::ratio(1, 3), 1.0 / 3.0);
     }
 }

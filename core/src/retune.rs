@@ -11,25 +11,35 @@
 //! * "Drive lock lost": |A1| below `lock_min_um` for `lock_lost_s`. A ramp in progress
 //!   is then reversed to where it came from, and no new retune starts until the lock is
 //!   back.
+//!
+//! The decision (ω̂y², the band, the target) runs in the estimator's precision `T`:
+//! `f32` on the chip, whose ω̂y² is an `f32` value in the first place, so evaluating it in
+//! soft-float `f64` bought nothing and cost ~10k instructions on the deciding tick. Only
+//! the move itself (target − centre, the ramp length) is formed in `f64`, where the
+//! centre lives.
 
-/// The drive's principal parametric band in ω (pump half-frequency), from θ1.
+use crate::real::Real;
+
+/// The drive's principal parametric band in ω (pump half-frequency), from θ1, in the
+/// estimator's precision `T` (the same operations as in `f64`, so the host's `f64` core
+/// is unchanged; on the chip `f32` keeps the band to ~1e-7 of ω, far inside its margin).
 /// Returns `None` when the pump is too weak for any band (β < μ√K) or θ is invalid.
-pub fn drive_band(th1: &[f64; 8], s: f64) -> Option<(f64, f64)> {
-    let k = -(th1[1] + (s - 1.0) * th1[5]);
-    let b = libm::fabs(s * th1[5]) / 2.0;
+pub fn drive_band<T: Real>(th1: &[T; 8], s: T) -> Option<(T, T)> {
+    let k = -(th1[1] + (s - T::ONE) * th1[5]);
+    let b = (s * th1[5]).abs() / T::from_f64(2.0);
     let mu = -th1[0];
-    if !(k.is_finite() && b.is_finite() && mu.is_finite()) || k <= 0.0 {
+    if !(k.is_finite() && b.is_finite() && mu.is_finite()) || k <= T::ZERO {
         return None;
     }
     let disc = b * b - mu * mu * k;
-    if disc <= 0.0 {
+    if disc <= T::ZERO {
         return None;
     }
-    let r = libm::sqrt(disc);
-    if k - r <= 0.0 {
+    let r = disc.sqrt();
+    if k - r <= T::ZERO {
         return None;
     }
-    Some((libm::sqrt(k - r), libm::sqrt(k + r)))
+    Some(((k - r).sqrt(), (k + r).sqrt()))
 }
 
 /// What the supervisor decided this tick.
@@ -55,15 +65,17 @@ pub enum RetuneAction {
 
 /// Supervisor state.
 #[derive(Clone, Copy, Debug)]
-pub struct Supervisor {
+pub struct Supervisor<T> {
     /// Retune allowed.
     pub enabled: bool,
     ramp_min: u64,
     max_rate: f64,
     deadband: f64,
-    margin: f64,
+    /// The dead band and margin in `T` (the decision's precision).
+    deadband_t: T,
+    margin: T,
     min_interval: u64,
-    lock_min: f64,
+    lock_min: T,
     lock_lost_after: u64,
     below_since: Option<u64>,
     locked: bool,
@@ -96,24 +108,24 @@ pub struct SupervisorSettings {
 
 /// Health inputs of one decision.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct RetuneInputs {
+pub struct RetuneInputs<T> {
     /// Sample index.
     pub k: u64,
     /// Everything healthy and settled (inputs, excitation, covariance, no change).
     pub healthy: bool,
-    /// Estimated ω_y² (f64).
-    pub wy2: f64,
+    /// Estimated ω_y².
+    pub wy2: T,
     /// Estimated drive band (ω), if any.
-    pub band: Option<(f64, f64)>,
-    /// Current centre ω.
+    pub band: Option<(T, T)>,
+    /// Current centre ω (f64: the move target − centre is formed in f64).
     pub centre_om: f64,
     /// Drive amplitude |A1| (L0).
-    pub drive_amp: f64,
+    pub drive_amp: T,
     /// The scheduler's ramp has finished.
     pub ramp_done: bool,
 }
 
-impl Supervisor {
+impl<T: Real> Supervisor<T> {
     /// A supervisor with these settings.
     pub fn new(s: SupervisorSettings) -> Self {
         Supervisor {
@@ -121,9 +133,10 @@ impl Supervisor {
             ramp_min: s.ramp_min.max(1),
             max_rate: s.max_rate,
             deadband: s.deadband,
-            margin: s.margin,
+            deadband_t: T::from_f64(s.deadband),
+            margin: T::from_f64(s.margin),
             min_interval: s.min_interval,
-            lock_min: s.lock_min,
+            lock_min: T::from_f64(s.lock_min),
             lock_lost_after: s.lock_lost_after,
             below_since: None,
             locked: false,
@@ -155,7 +168,7 @@ impl Supervisor {
     /// then): allowed, locked, healthy, no ramp running, the minimum interval elapsed, and
     /// √ω̂y² farther than the dead band from the centre. The band guard clamps the target
     /// of a retune; it does not trigger one by itself.
-    pub fn would_retune(&self, k: u64, healthy: bool, wy2: f64, centre_om: f64) -> bool {
+    pub fn would_retune(&self, k: u64, healthy: bool, wy2: T, centre_om: T) -> bool {
         if !(self.enabled && self.locked && healthy && self.ramping.is_none()) {
             return false;
         }
@@ -165,13 +178,13 @@ impl Supervisor {
             return false;
         }
         // |√wy2 − c| > db without a square root: wy2 outside [(c − db)², (c + db)²]
-        let (lo, hi) = (centre_om - self.deadband, centre_om + self.deadband);
-        wy2.is_finite() && wy2 > 0.0 && (wy2 < lo * lo || wy2 > hi * hi)
+        let (lo, hi) = (centre_om - self.deadband_t, centre_om + self.deadband_t);
+        wy2.is_finite() && wy2 > T::ZERO && (wy2 < lo * lo || wy2 > hi * hi)
     }
 
     /// Target ω for an estimated ω_y² and band.
-    pub fn target(&self, wy2: f64, band: Option<(f64, f64)>) -> Option<f64> {
-        if !(wy2.is_finite() && wy2 > 0.0) {
+    pub fn target(&self, wy2: T, band: Option<(T, T)>) -> Option<T> {
+        if !(wy2.is_finite() && wy2 > T::ZERO) {
             return None;
         }
         let (lo, hi) = band?;
@@ -179,13 +192,13 @@ impl Supervisor {
         let (lo, hi) = (lo + self.margin * w, hi - self.margin * w);
         // not `f64::clamp`: it panics when lo > hi or either is NaN (a bad band or a
         // margin above 0.5); max/min never panic and agree with it everywhere else
-        // (`sqrt(wy2)` is finite here). Its panic message also pulled ≈ 15 KB of float
-        // formatting into the firmware image.
-        Some(libm::sqrt(wy2).max(lo).min(hi))
+        // (`sqrt(wy2)` is finite here, and so is the band `drive_band` returns). Its panic
+        // message also pulled ≈ 15 KB of float formatting into the firmware image.
+        Some(wy2.sqrt().max(lo).min(hi))
     }
 
     /// One tick of the supervisor.
-    pub fn tick(&mut self, i: &RetuneInputs) -> RetuneAction {
+    pub fn tick(&mut self, i: &RetuneInputs<T>) -> RetuneAction {
         // drive lock
         if i.drive_amp.is_finite() && i.drive_amp >= self.lock_min {
             self.below_since = None;
@@ -223,6 +236,8 @@ impl Supervisor {
         let Some(target) = self.target(i.wy2, i.band) else {
             return RetuneAction::None;
         };
+        // the move in f64, where the centre lives
+        let target = target.to_f64();
         let delta = target - i.centre_om;
         if libm::fabs(delta) <= self.deadband {
             return RetuneAction::None;
@@ -288,7 +303,7 @@ mod tests {
 
     #[test]
     fn retunes_to_sqrt_wy2_once_healthy() {
-        let mut s = Supervisor::new(settings());
+        let mut s = Supervisor::<f64>::new(settings());
         let band = drive_band(&th1_table2(), 1.0);
         let mut inp = RetuneInputs {
             k: 0,
@@ -327,7 +342,7 @@ mod tests {
 
     #[test]
     fn target_is_clamped_into_the_band() {
-        let s = Supervisor::new(settings());
+        let s = Supervisor::<f64>::new(settings());
         let band = drive_band(&th1_table2(), 1.0).unwrap();
         let t = s.target(1.2, Some(band)).unwrap();
         assert!(t < band.1 && t > band.0);

@@ -49,9 +49,10 @@ pub struct SvfCoeffs<T> {
 
 impl<T: Real> SvfCoeffs<T> {
     /// Coefficients for corner `w` (rad per time unit) sampled every `ts` time units.
+    #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new(w: f64, ts: f64) -> Self {
         let h = w * ts;
-        let a = libm::exp(-h);
+        let a = T::design_exp_f64(-h);
         let g1 = 1.0 - (1.0 - a) / h;
         let g2 = (h - 2.0 + a * (2.0 + h)) / h;
         SvfCoeffs {

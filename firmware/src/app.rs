@@ -501,12 +501,14 @@ where
         cal_y: LockinCalibration,
         guard: PumpGuard,
     ) -> Result<Self, ConfigError> {
-        let est = cfg.build::<f32>()?;
+        let valid = cfg.validated()?;
         let sysclk = chips.dds.sysclk_hz();
-        guard.validate(sysclk, est.initial_pump_hz())?;
+        guard.validate(sysclk, cfg.initial_pump_hz())?;
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         let guard_words = (word(guard.min_hz), word(guard.max_hz));
         Ok(Self {
+            // first, straight into the returned value (no estimator-sized temporary)
+            est: valid.build::<f32>(),
             chips,
             cal_x,
             cal_y,
@@ -515,7 +517,6 @@ where
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: beyond(cfg.monitor.full_scale_um),
             accel_beyond_mps2: beyond(cfg.monitor.accel_full_scale_mps2),
-            est,
             pump: None,
             dirty: true,
             counters: FwCounters::default(),

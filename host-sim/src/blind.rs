@@ -277,7 +277,7 @@ pub fn run(
 /// Output-error closure of the true effects at their true sizes on the diagnosis's
 /// held-out span (the same re-simulation and error measure as the diagnosis).
 fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyhow::Result<f64> {
-    let before = report["output_error"]["before"]["combined"]
+    let before = report["output_error"]["before"]["above_noise"]
         .as_f64()
         .context("no output error in the report")?;
     let span = &report["spans_s"]["held_out"];
@@ -319,8 +319,11 @@ fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyho
     )?;
     let mut full = vec![crate::lockin::LockinOut::default(); rec.rows.len()];
     full[k0..k1].clone_from_slice(&sim);
-    let (a, b) = diagnose::output_error(rec, &full, k0..k1);
-    Ok(1.0 - a.hypot(b) / before.max(1e-300))
+    let ratio = report["output_error"]["noise_diff_ratio"]
+        .as_f64()
+        .context("no noise ratio")?;
+    let e = diagnose::output_error(rec, &full, k0..k1, ratio);
+    Ok(1.0 - e.above_noise / before.max(1e-300))
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -394,6 +397,15 @@ fn summarize(s: &[Scored], n: usize, seed: u64) -> Value {
         "top1_single_above_limit": frac(single_above.iter().filter(|r| r.correct).count(), single_above.len()),
         "single_above_limit_records": single_above.len(),
         "unknown_on_outside": frac(outside.iter().filter(|r| r.verdict == "unknown").count(), outside.len()),
+        "unknown_on_outside_above_limit": frac(
+            outside.iter().filter(|r| r.above_limit && r.verdict == "unknown").count(),
+            outside.iter().filter(|r| r.above_limit).count()
+        ),
+        "outside_above_limit_records": outside.iter().filter(|r| r.above_limit).count(),
+        "top1_single_all_sizes": frac(
+            s.iter().filter(|r| r.category == "single" && r.correct).count(),
+            s.iter().filter(|r| r.category == "single").count()
+        ),
         "false_attribution_on_outside": frac(false_attr, outside.len()),
         "outside_records": outside.len(),
         "false_alarms_on_clean": frac(clean.iter().filter(|r| r.verdict != "none").count(), clean.len()),
@@ -428,8 +440,17 @@ fn markdown(sm: &Value, s: &[Scored]) -> String {
         p(&sm["unknown_on_outside"])
     ));
     m.push_str(&format!(
+        "| `unknown` on out-of-library records above their detection limit ({}) | {} | |\n",
+        sm["outside_above_limit_records"],
+        p(&sm["unknown_on_outside_above_limit"])
+    ));
+    m.push_str(&format!(
         "| false attribution on out-of-library records | {} | |\n",
         p(&sm["false_attribution_on_outside"])
+    ));
+    m.push_str(&format!(
+        "| top-1 on single library effects, all sizes (`none` below the limit counts as a miss) | {} | |\n",
+        p(&sm["top1_single_all_sizes"])
     ));
     m.push_str(&format!(
         "| false alarms on clean records ({}) | {} | ≤ 10 % |\n",

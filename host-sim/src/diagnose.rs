@@ -854,8 +854,10 @@ pub struct PlotData {
     pub shares: Vec<(String, f64)>,
     /// Ranking (effect, gap closure, significant).
     pub ranking: Vec<(String, f64, bool)>,
-    /// Envelopes: (t, |x1| rec, |y1| rec, |x1| sim before, |y1| sim before, |x1| after, |y1| after).
-    pub envelopes: Vec<[f64; 7]>,
+    /// Envelopes on the held-out span: (t, |x1| rec, |y1| rec, |x1| sim before, |y1| sim
+    /// before, |x1| after, |y1| after, then |x1 rec − x1 sim| and |y1 rec − y1 sim| before
+    /// and after), µm.
+    pub envelopes: Vec<[f64; 11]>,
     /// Windowed gap energy over time: (t, baseline − floor).
     pub windows: Vec<(f64, f64)>,
     /// CUSUM of the windowed gap.
@@ -1712,19 +1714,20 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         )?;
         let mut after = before.clone();
         after[hold_start..last + 1].clone_from_slice(&after_h);
-        let err = |sim: &[LockinOut], from: usize, to: usize| output_error(rec, sim, from..to);
-        let (bx, by) = err(before, hold_start, last + 1);
-        let (ax, ay) = err(&after, hold_start, last + 1);
-        let ob = bx.hypot(by);
-        let oa = ax.hypot(ay);
+        let ratio = lockin_noise_diff_ratio(rec)?;
+        let b = output_error(rec, before, hold_start..last + 1, ratio);
+        let a = output_error(rec, &after, hold_start..last + 1, ratio);
+        let cl = |x: f64, y: f64| if x > 0.0 { 1.0 - y / x } else { 0.0 };
         oe = json!({
             "held_out_span_s": [hold_t.0, hold_t.1],
-            "before": {"drive": bx, "sense": by, "combined": ob},
-            "after": {"drive": ax, "sense": ay, "combined": oa},
-            "closure": if ob > 0.0 { 1.0 - oa / ob } else { 0.0 },
+            "before": {"drive": b.drive, "sense": b.sense, "combined": b.combined, "above_noise": b.above_noise},
+            "after": {"drive": a.drive, "sense": a.sense, "combined": a.combined, "above_noise": a.above_noise},
+            "closure": cl(b.above_noise, a.above_noise),
+            "closure_raw": cl(b.combined, a.combined),
+            "noise_diff_ratio": ratio,
             "added": verdict_spec.iter().map(|s| s.to_string()).collect::<Vec<_>>(),
             "rate_dps": gamma_fit.map(|g| rate_dps_from_gamma(g, omega0)),
-            "note": "rms of the lock-in channel errors (DC, 1st, 3rd harmonics of each axis) relative to the rms of the record's drive + sense channels, on the held-out span; simulator re-run open-loop on the record's pump, amplitude, accelerations and temperature",
+            "note": "rms of the lock-in channel errors (DC, 1st, 3rd harmonics of each axis) relative to the rms of the record's channels, on the held-out span; above_noise removes the record's own noise (estimated from the error's sample-to-sample differences); closure uses above_noise; simulator re-run open-loop on the record's pump, amplitude, accelerations and temperature",
         });
         tick("resimulate_with_effect", &mut timing);
         let stride = ((last + 1 - hold_start) / 2000).max(1);
@@ -1732,6 +1735,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         for k in (hold_start..=last).step_by(stride) {
             let r = &rec.rows[k];
             let h = |v: (f64, f64)| v.0.hypot(v.1);
+            let d = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0 * l0).hypot(a.1 - b.1 * l0);
             envelopes.push([
                 t[k],
                 h(r.x_um[0]),
@@ -1740,6 +1744,10 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
                 h(before[k].y[0]) * l0,
                 h(after[k].x[0]) * l0,
                 h(after[k].y[0]) * l0,
+                d(r.x_um[0], before[k].x[0]),
+                d(r.y_um[0], before[k].y[0]),
+                d(r.x_um[0], after[k].x[0]),
+                d(r.y_um[0], after[k].y[0]),
             ]);
         }
     }
@@ -1997,24 +2005,120 @@ pub fn resimulate(
     Ok(out)
 }
 
+/// Output error of re-simulated lock-in outputs against a record.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OutputError {
+    /// Drive channels (DC, 1st, 3rd harmonic): rms error relative to the record's rms.
+    pub drive: f64,
+    /// Sense channels, same.
+    pub sense: f64,
+    /// Both axes.
+    pub combined: f64,
+    /// Both axes with the record's own noise removed (its energy estimated from the
+    /// sample-to-sample differences of the error and the lock-in noise's known ratio).
+    pub above_noise: f64,
+}
+
+/// `E|Δn|²/E|n|²` of the lock-in output noise of white displacement noise (the simulator's
+/// lock-in at the record's settings, gyro at rest): the error's slow part barely moves
+/// from sample to sample, its noise part does, by this ratio.
+pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
+    let h = &rec.header;
+    let omega0 = TAU * h.f0_hz;
+    let cfg = SimConfig {
+        omega0_rad_s: omega0,
+        fs_hz: h.fs_hz,
+        steps_per_period: 32,
+        omega_max: 1.05,
+        lpf_order: h.lockin_lpf_order,
+        lpf_hz: h.lockin_lpf_hz,
+        noise_density: 1e-6,
+        seed: 7,
+    };
+    let mut sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let mut th = Theta::table2();
+    th.drive[5] = 0.0;
+    th.drive[6] = 0.0;
+    let u = PlantInputs {
+        omega: 1.0,
+        s: 1.0,
+        ax: 0.0,
+        ay: 0.0,
+    };
+    let mut prev: Option<LockinOut> = None;
+    let (mut dd, mut nn) = (0.0, 0.0);
+    for k in 0..600 {
+        sim.advance(&th, &u, &u);
+        let o = sim.lockin();
+        if k >= 20 {
+            let v = |o: &LockinOut| {
+                [
+                    o.x0, o.x[0].0, o.x[0].1, o.x[2].0, o.x[2].1, o.y0, o.y[0].0, o.y[0].1,
+                    o.y[2].0, o.y[2].1,
+                ]
+            };
+            if let Some(p) = &prev {
+                for (a, b) in v(&o).iter().zip(v(p)) {
+                    dd += (a - b).powi(2);
+                    nn += a * a;
+                }
+            }
+        }
+        prev = Some(o);
+    }
+    Ok(if nn > 0.0 { dd / nn } else { 1.0 })
+}
+
 /// Output error of re-simulated lock-in outputs `sim` (indexed like the record) against
-/// the record on `span`: (drive, sense) rms error of the DC, 1st and 3rd harmonic channels,
-/// each relative to the rms of the record's channels of both axes.
-pub fn output_error(rec: &Record, sim: &[LockinOut], span: std::ops::Range<usize>) -> (f64, f64) {
+/// the record on `span`: rms error of the DC, 1st and 3rd harmonic channels relative to
+/// the rms of the record's channels of both axes; `diff_ratio` from
+/// [`lockin_noise_diff_ratio`].
+pub fn output_error(
+    rec: &Record,
+    sim: &[LockinOut],
+    span: std::ops::Range<usize>,
+    diff_ratio: f64,
+) -> OutputError {
     let l0 = rec.header.l0_um;
-    let (mut ex, mut ey, mut nn) = (0.0, 0.0, 0.0);
-    let c2 = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0 * l0).powi(2) + (a.1 - b.1 * l0).powi(2);
-    for k in span {
+    let err = |k: usize| -> [f64; 10] {
         let (r, o) = (&rec.rows[k], &sim[k]);
-        ex += (r.x0_um - o.x0 * l0).powi(2) + c2(r.x_um[0], o.x[0]) + c2(r.x_um[2], o.x[2]);
-        ey += (r.y0_um - o.y0 * l0).powi(2) + c2(r.y_um[0], o.y[0]) + c2(r.y_um[2], o.y[2]);
+        [
+            r.x0_um - o.x0 * l0,
+            r.x_um[0].0 - o.x[0].0 * l0,
+            r.x_um[0].1 - o.x[0].1 * l0,
+            r.x_um[2].0 - o.x[2].0 * l0,
+            r.x_um[2].1 - o.x[2].1 * l0,
+            r.y0_um - o.y0 * l0,
+            r.y_um[0].0 - o.y[0].0 * l0,
+            r.y_um[0].1 - o.y[0].1 * l0,
+            r.y_um[2].0 - o.y[2].0 * l0,
+            r.y_um[2].1 - o.y[2].1 * l0,
+        ]
+    };
+    let (mut ex, mut ey, mut nn, mut dd) = (0.0, 0.0, 0.0, 0.0);
+    let mut prev: Option<[f64; 10]> = None;
+    for k in span {
+        let e = err(k);
+        ex += e[..5].iter().map(|v| v * v).sum::<f64>();
+        ey += e[5..].iter().map(|v| v * v).sum::<f64>();
+        if let Some(p) = prev {
+            dd += e.iter().zip(p).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        }
+        prev = Some(e);
+        let r = &rec.rows[k];
         for v in [r.x_um[0], r.x_um[2], r.y_um[0], r.y_um[2]] {
             nn += v.0 * v.0 + v.1 * v.1;
         }
         nn += r.x0_um * r.x0_um + r.y0_um * r.y0_um;
     }
     let nn = nn.max(1e-300);
-    ((ex / nn).sqrt(), (ey / nn).sqrt())
+    let noise = dd / diff_ratio.max(1e-12);
+    OutputError {
+        drive: (ex / nn).sqrt(),
+        sense: (ey / nn).sqrt(),
+        combined: ((ex + ey) / nn).sqrt(),
+        above_noise: ((ex + ey - noise).max(0.0) / nn).sqrt(),
+    }
 }
 
 /// State [X, X', Y, Y'] reconstructed from a record row's harmonics at phase ψ.
@@ -2204,10 +2308,13 @@ fn markdown(d: &Diagnosis, record_name: &str) -> String {
     if !j["output_error"].is_null() {
         let o = &j["output_error"];
         s.push_str(&format!(
-            "| simulator output error (rms envelope error, relative) | {:.3e} | {:.3e} | {:.1} % |\n",
+            "| simulator output error above the record's noise (relative rms) | {:.3e} | {:.3e} | {:.1} % |\n| simulator output error, raw (noise included) | {:.3e} | {:.3e} | {:.1} % |\n",
+            f(&o["before"]["above_noise"]),
+            f(&o["after"]["above_noise"]),
+            100.0 * f(&o["closure"]),
             f(&o["before"]["combined"]),
             f(&o["after"]["combined"]),
-            100.0 * f(&o["closure"])
+            100.0 * f(&o["closure_raw"])
         ));
         s.push_str(&format!(
             "\nRe-run with: {}.\n\n![envelopes](envelopes.png)\n",

@@ -170,49 +170,42 @@ fn pad(lo: f64, hi: f64) -> (f64, f64) {
 fn envelope_plot(path: &Path, d: &Diagnosis) -> Result<()> {
     let (_root, body) = figure(
         path,
-        "how far: recorded versus re-simulated envelopes (before / after adding the effect)",
+        "how far: recorded versus re-simulated envelopes on the held-out span, before / after adding the effect",
     )?;
-    let (top, bottom) = body.split_vertically(body.dim_in_pixel().1 / 2);
+    let (left, right) = body.split_horizontally(body.dim_in_pixel().0 / 2);
+    let (lt, lb) = left.split_vertically(left.dim_in_pixel().1 / 2);
+    let (rt, rb) = right.split_vertically(right.dim_in_pixel().1 / 2);
     let e = &d.plots.envelopes;
-    let x = (
-        e.first().map_or(0.0, |v| v[0]),
-        e.last().map_or(1.0, |v| v[0]),
-    );
-    let panel = |area: &Area<'_>,
-                 cap: &str,
-                 i_rec: usize,
-                 i_b: usize,
-                 i_a: usize,
-                 last: bool|
-     -> Result<()> {
-        let (lo, hi) =
-            min_max(e.iter().flat_map(|v| [v[i_rec], v[i_b], v[i_a]])).unwrap_or((0.0, 1.0));
+    let x = (e.first().map_or(0.0, |v| v[0]), e.last().map_or(1.0, |v| v[0]));
+    let s = |i: usize| e.iter().map(|v| (v[0], v[i])).collect::<Vec<_>>();
+    let env = |area: &Area<'_>, cap: &str, i_rec: usize, i_b: usize, i_a: usize, last: bool| -> Result<()> {
+        let (lo, hi) = min_max(e.iter().flat_map(|v| [v[i_rec], v[i_b], v[i_a]])).unwrap_or((0.0, 1.0));
         let mut p = Panel::new(cap.into(), x, pad(lo, hi));
         p.y_desc = "amplitude (µm)".into();
         if last {
             p.x_desc = Some("time (s)".into());
         }
-        p.bands.push(Band {
-            x0: d.plots.hold_span.0,
-            x1: d.plots.hold_span.1,
-            color: TAB10[1].mix(0.12),
-        });
-        p.band_labels
-            .push(("held-out span".into(), TAB10[1].mix(0.12)));
-        let s = |i: usize| e.iter().map(|v| (v[0], v[i])).collect::<Vec<_>>();
-        p.lines
-            .push(Line::new(s(i_rec), RGBColor(20, 20, 20), 2).label("record"));
-        p.lines.push(
-            Line::new(s(i_b), TAB10[3], 1)
-                .dashed()
-                .label("simulator (model)"),
-        );
-        p.lines
-            .push(Line::new(s(i_a), TAB10[2], 2).label("simulator + effect"));
+        p.lines.push(Line::new(s(i_rec), RGBColor(20, 20, 20), 2).label("record"));
+        p.lines.push(Line::new(s(i_b), TAB10[3], 1).dashed().label("simulator (model)"));
+        p.lines.push(Line::new(s(i_a), TAB10[2], 1).label("simulator + effect"));
         p.legend = Some(SeriesLabelPosition::LowerRight);
         draw_panel(area, &p)
     };
-    panel(&top, "drive |x1|", 1, 3, 5, false)?;
-    panel(&bottom, "sense |y1|", 2, 4, 6, true)?;
+    let err = |area: &Area<'_>, cap: &str, i_b: usize, i_a: usize, last: bool| -> Result<()> {
+        let (_, hi) = min_max(e.iter().flat_map(|v| [v[i_b], v[i_a]])).unwrap_or((0.0, 1.0));
+        let mut p = Panel::new(cap.into(), x, (0.0, hi.max(1e-12) * 1.05));
+        p.y_desc = "|record − simulator| (µm)".into();
+        if last {
+            p.x_desc = Some("time (s)".into());
+        }
+        p.lines.push(Line::new(s(i_b), TAB10[3], 1).label("model"));
+        p.lines.push(Line::new(s(i_a), TAB10[2], 1).label("model + effect"));
+        p.legend = Some(SeriesLabelPosition::UpperRight);
+        draw_panel(area, &p)
+    };
+    env(&lt, "drive |x1|", 1, 3, 5, false)?;
+    env(&lb, "sense |y1|", 2, 4, 6, true)?;
+    err(&rt, "drive: error of the simulated x1", 7, 9, false)?;
+    err(&rb, "sense: error of the simulated y1", 8, 10, true)?;
     Ok(())
 }

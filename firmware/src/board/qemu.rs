@@ -49,6 +49,8 @@ static TABLE: &[u8] = include_bytes!("../../replay/fw-drift-retune.bin");
 /// SysTick runs at the core clock (168 MHz on netduinoplus2); with `-icount shift=0`
 /// QEMU advances 1 ns per instruction, so instructions = ticks · 1e9 / 168e6.
 const SYSTICK_HZ: u64 = 168_000_000;
+/// The tick budget, instructions (the run counts the ticks above it).
+const TICK_BUDGET_INSNS: u64 = 20_000;
 
 /// The replay chips answer at once: no wait is needed (the real board waits).
 struct NoWait;
@@ -173,6 +175,10 @@ fn replay(syst: &mut SYST) -> bool {
     let mut total: u64 = 0;
     let mut worst: u32 = 0;
     let mut worst_k: usize = 0;
+    // the five costliest ticks (SysTick counts, tick), and the ticks over the budget
+    let mut top = [(0u32, 0usize); 5];
+    let budget = (TICK_BUDGET_INSNS * SYSTICK_HZ / 1_000_000_000) as u32;
+    let mut over_budget: u32 = 0;
     for k in 0..table.len() {
         run::apply_controls(&table, k, app);
         let Some((pump_hz, pump_scale)) = table.pump(k) else {
@@ -186,6 +192,15 @@ fn replay(syst: &mut SYST) -> bool {
         if dt > worst {
             worst = dt;
             worst_k = k;
+        }
+        over_budget += u32::from(dt > budget);
+        if dt > top[top.len() - 1].0 {
+            let mut i = top.len() - 1;
+            top[i] = (dt, k);
+            while i > 0 && top[i].0 > top[i - 1].0 {
+                top.swap(i, i - 1);
+                i -= 1;
+            }
         }
         check.observe(&table, k, app, &r, dds.active_pump_hz());
         #[cfg(feature = "tick-stream")]
@@ -221,15 +236,31 @@ fn replay(syst: &mut SYST) -> bool {
         max,
         worst_k
     );
+    let insns = |dt: u32| u64::from(dt) * 1_000_000_000 / SYSTICK_HZ;
+    defmt::info!(
+        "costliest ticks (instructions, tick): {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}; {=u32} ticks over {=u64}",
+        insns(top[0].0),
+        top[0].1,
+        insns(top[1].0),
+        top[1].1,
+        insns(top[2].0),
+        top[2].1,
+        insns(top[3].0),
+        top[3].1,
+        insns(top[4].0),
+        top[4].1,
+        over_budget,
+        TICK_BUDGET_INSNS
+    );
     let loop_stack = stack_high_water();
-    let (_, top) = stack_bounds();
+    let (_, stack_top) = stack_bounds();
     defmt::info!(
         "stack high-water mark: set-up {=usize} B, tick loop {=usize} B = the board's frame {=usize} B (holding the App, {=usize} B) + {=usize} B below it (tick, checks, telemetry)",
         setup_stack,
         loop_stack,
-        top - loop_sp,
+        stack_top - loop_sp,
         core::mem::size_of::<run::ReplayApp<'static>>(),
-        loop_stack.saturating_sub(top - loop_sp)
+        loop_stack.saturating_sub(stack_top - loop_sp)
     );
     let v = check.verdict(&table, app, dds.active_pump_hz());
     defmt::info!("core counters: {}", app.estimator().counters());

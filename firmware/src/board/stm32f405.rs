@@ -37,7 +37,6 @@ use cortex_m_rt::entry;
 use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
 use embedded_hal_bus::spi::{ExclusiveDevice, RefCellDevice};
-use panic_probe as _;
 use paragyro_core::Config;
 use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
 use paragyro_firmware::drivers::ad9959::Ad9959;
@@ -231,4 +230,18 @@ fn main() -> ! {
             cycles_max = 0;
         }
     }
+}
+
+/// Panics print their location over defmt and stop at a `udf` (the probe reports the
+/// fault and a backtrace), as panic-probe does, but without formatting the message:
+/// `core::fmt` and the panic messages were ≈ 1.5 KB of the 64 KiB image. The library
+/// is linted free of panics; what is left (HAL, indexing proven in range) should not fire.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    match info.location() {
+        Some(l) => defmt::error!("panic at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panic"),
+    }
+    cortex_m::asm::udf()
 }
