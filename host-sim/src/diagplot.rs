@@ -176,18 +176,34 @@ fn envelope_plot(path: &Path, d: &Diagnosis) -> Result<()> {
     let (lt, lb) = left.split_vertically(left.dim_in_pixel().1 / 2);
     let (rt, rb) = right.split_vertically(right.dim_in_pixel().1 / 2);
     let e = &d.plots.envelopes;
-    let x = (e.first().map_or(0.0, |v| v[0]), e.last().map_or(1.0, |v| v[0]));
+    let x = (
+        e.first().map_or(0.0, |v| v[0]),
+        e.last().map_or(1.0, |v| v[0]),
+    );
     let s = |i: usize| e.iter().map(|v| (v[0], v[i])).collect::<Vec<_>>();
-    let env = |area: &Area<'_>, cap: &str, i_rec: usize, i_b: usize, i_a: usize, last: bool| -> Result<()> {
-        let (lo, hi) = min_max(e.iter().flat_map(|v| [v[i_rec], v[i_b], v[i_a]])).unwrap_or((0.0, 1.0));
+    let env = |area: &Area<'_>,
+               cap: &str,
+               i_rec: usize,
+               i_b: usize,
+               i_a: usize,
+               last: bool|
+     -> Result<()> {
+        let (lo, hi) =
+            min_max(e.iter().flat_map(|v| [v[i_rec], v[i_b], v[i_a]])).unwrap_or((0.0, 1.0));
         let mut p = Panel::new(cap.into(), x, pad(lo, hi));
         p.y_desc = "amplitude (µm)".into();
         if last {
             p.x_desc = Some("time (s)".into());
         }
-        p.lines.push(Line::new(s(i_rec), RGBColor(20, 20, 20), 2).label("record"));
-        p.lines.push(Line::new(s(i_b), TAB10[3], 1).dashed().label("simulator (model)"));
-        p.lines.push(Line::new(s(i_a), TAB10[2], 1).label("simulator + effect"));
+        p.lines
+            .push(Line::new(s(i_rec), RGBColor(20, 20, 20), 2).label("record"));
+        p.lines.push(
+            Line::new(s(i_b), TAB10[3], 1)
+                .dashed()
+                .label("simulator (model)"),
+        );
+        p.lines
+            .push(Line::new(s(i_a), TAB10[2], 1).label("simulator + effect"));
         p.legend = Some(SeriesLabelPosition::LowerRight);
         draw_panel(area, &p)
     };
@@ -199,7 +215,8 @@ fn envelope_plot(path: &Path, d: &Diagnosis) -> Result<()> {
             p.x_desc = Some("time (s)".into());
         }
         p.lines.push(Line::new(s(i_b), TAB10[3], 1).label("model"));
-        p.lines.push(Line::new(s(i_a), TAB10[2], 1).label("model + effect"));
+        p.lines
+            .push(Line::new(s(i_a), TAB10[2], 1).label("model + effect"));
         p.legend = Some(SeriesLabelPosition::UpperRight);
         draw_panel(area, &p)
     };
