@@ -82,6 +82,7 @@ pub trait Real:
 
 /// e^x in `f64`: x = n·ln2 + r with a two-part ln2 (|r| ≤ ln2/2), a Taylor series of
 /// e^r to r¹⁶ (truncation < 1e-17), scaled by 2ⁿ. Within a few `f64` ulps.
+#[allow(clippy::excessive_precision)] // fdlibm's constants, as published
 fn exp_f64(x: f64) -> f64 {
     const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
     const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
@@ -111,6 +112,7 @@ fn exp_f64(x: f64) -> f64 {
 
 /// (cos x, sin x) in `f64` for moderate |x| (< 1e6): x = nπ/2 + r with a two-part π/2,
 /// then fdlibm's `__kernel_cos`/`__kernel_sin` polynomials on |r| ≤ π/4.
+#[allow(clippy::excessive_precision)] // fdlibm's constants, as published
 pub(crate) fn cos_sin_f64(x: f64) -> (f64, f64) {
     const PIO2_HI: f64 = 1.570_796_326_734_125_614_17e0;
     const PIO2_LO: f64 = 6.077_100_506_506_192_249_32e-11;
