@@ -1612,7 +1612,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         dd.atan2(d)
     };
     let mut regimes = vec![
-        regime(&amp, "drive amplitude |x1| (µm)"),
+        regime(&amp, "drive amplitude (µm)"),
         regime(&detune, "detuning Ω/2π − f_y,model (Hz)"),
         regime(&dither_phase, "dither phase (rad)"),
     ];
@@ -2401,13 +2401,14 @@ fn markdown(d: &Diagnosis, record_name: &str) -> String {
         f(&tm["cusum_extreme_at_s"])
     ));
     s.push_str(&format!(
-        "\n## Method\n\nRows of the core's estimator about the model (never re-linearised), weighted to unit noise; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the catch-all (14 θ free plus all quadratic and cubic force monomials) with every library column. Thresholds: |size|/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap. See docs/diagnosis.md.\n",
+        "\n## Method\n\nThe record's rows about the model (the core's estimator, never re-linearised, rows weighted to unit noise) minus the rows of the simulator re-run on the record's inputs; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the best held-out energy of any model: each effect, the catch-all (14 θ free plus the quadratic and cubic force monomials), and both together. Thresholds: size/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap, at most {:.0} % of the gap above the noise left unexplained. See docs/diagnosis.md.\n",
         f(&j["spans_s"]["fit"][0]),
         f(&j["spans_s"]["fit"][1]),
         f(&j["spans_s"]["held_out"][0]),
         f(&j["spans_s"]["held_out"][1]),
         100.0 * GAP_MIN,
-        100.0 * SHARE_MIN
+        100.0 * SHARE_MIN,
+        100.0 * UNEXPLAINED_MAX
     ));
     s
 }
