@@ -10,7 +10,7 @@
 //! counted and skipped, and the estimate is held.
 
 use crate::complex::Cplx;
-use crate::config::Config;
+use crate::config::{Config, ValidConfig};
 use crate::excitation::Scheduler;
 use crate::lpf::{ReplicaChannel, ReplicaCoeffs};
 use crate::monitor::{
@@ -230,10 +230,42 @@ struct Replicas<T> {
     ay: ReplicaChannel<T>,
 }
 
+/// Configuration values the tick uses, converted once (the same expressions as before,
+/// evaluated at design time instead of in soft-float `f64` on every tick of the chip).
+#[derive(Clone, Copy, Debug)]
+struct TickConsts<T> {
+    /// `monitor.full_scale_um` and `monitor.accel_full_scale_mps2` in T.
+    full_scale: T,
+    accel_full_scale: T,
+    /// `rls.p_reset` in T.
+    p_reset: T,
+    /// The settle window and the relinearisation interval, samples.
+    settle_window: u64,
+    relin_every: u64,
+    /// The covariance-bounded limits `p0·n·1.0001` (n = 8, 6) in T.
+    lim1: T,
+    lim2: T,
+}
+
+impl<T: Real> TickConsts<T> {
+    fn of(cfg: &Config) -> Self {
+        TickConsts {
+            full_scale: T::from_f64(cfg.monitor.full_scale_um),
+            accel_full_scale: T::from_f64(cfg.monitor.accel_full_scale_mps2),
+            p_reset: T::from_f64(cfg.rls.p_reset),
+            settle_window: (cfg.retune.settle_window_s * cfg.fs_hz) as u64,
+            relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
+            lim1: T::from_f64(cfg.rls.p0 * 8.0 * 1.0001),
+            lim2: T::from_f64(cfg.rls.p0 * 6.0 * 1.0001),
+        }
+    }
+}
+
 /// The estimator (runtime form of a validated [`Config`]).
 #[derive(Clone, Debug)]
 pub struct Estimator<T: Real> {
     cfg: Config,
+    tc: TickConsts<T>,
     // derived constants
     f0_hz: f64,
     om_ref: f64,
@@ -273,7 +305,7 @@ pub struct Estimator<T: Real> {
     th14n: T,
     th22n: T,
     th24n: T,
-    settle: SettleTest,
+    settle: SettleTest<T>,
     sched: Scheduler<T>,
     sup: Supervisor<T>,
     // state
@@ -296,8 +328,17 @@ pub struct Estimator<T: Real> {
 impl<T: Real> Estimator<T> {
     /// Builds from a configuration that passed [`Config::validate`] (use
     /// [`Config::build`]).
-    #[inline(always)] // built in its caller's destination (stack, docs/firmware.md)
     pub(crate) fn from_valid_config(cfg: &Config) -> Self {
+        let mut e = Self::blank();
+        e.init_from(cfg);
+        e
+    }
+
+    /// Designs this estimator from a configuration that passed [`Config::validate`],
+    /// field by field in place: every large part (filters, tables, RLS) is written
+    /// straight into its field, so no estimator-sized temporary exists (the chip's
+    /// stack). The pattern below names every field, so none can be left out.
+    fn init_from(&mut self, cfg: &Config) {
         let omega0 = cfg.omega0_rad_s();
         let ts = omega0 / cfg.fs_hz; // sample period in τ
         let (th1n, th2n) = theta_from_physical(&cfg.nominal);
@@ -305,7 +346,6 @@ impl<T: Real> Estimator<T> {
         let nom = NominalConsts::<T>::new(&th1n, &th2n, om_ref);
         let w_svf = 2.0 * core::f64::consts::PI * cfg.svf_hz / omega0;
         let wc = 2.0 * core::f64::consts::PI * cfg.lockin_lpf_hz / omega0;
-        let rep_co = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts);
         let mut sc1 = [T::ZERO; 8];
         let mut sc2 = [T::ZERO; 6];
         for j in 0..8 {
@@ -353,55 +393,179 @@ impl<T: Real> Estimator<T> {
         });
         let every = 25u64;
         let need = ((t.settle_window_s * cfg.fs_hz) / every as f64) as usize + 1;
-        Estimator {
-            cfg: *cfg,
-            f0_hz: cfg.f0_hz,
+        let Estimator {
+            cfg: f_cfg,
+            tc: f_tc,
+            f0_hz: f_f0_hz,
+            om_ref: f_om_ref,
+            inv_l0: f_inv_l0,
+            accel_nd: f_accel_nd,
+            th1n: f_th1n,
+            th2n: f_th2n,
+            sc1: f_sc1,
+            sc2: f_sc2,
+            w1: f_w1,
+            w2: f_w2,
+            gate_startup: f_gate_startup,
+            gate_jump: f_gate_jump,
+            gate_bad: f_gate_bad,
+            dither_rms: f_dither_rms,
+            exc_var_min: f_exc_var_min,
+            s_alpha: f_s_alpha,
+            pump_ref_hz: f_pump_ref_hz,
+            inv_2f0: f_inv_2f0,
+            two_om_ref: f_two_om_ref,
+            rep: f_rep,
+            rep_co: f_rep_co,
+            rows: f_rows,
+            last_rows: f_last_rows,
+            last_known: f_last_known,
+            rls1: f_rls1,
+            rls2: f_rls2,
+            det1: f_det1,
+            det2: f_det2,
+            stuck: f_stuck,
+            exc: f_exc,
+            th14n: f_th14n,
+            th22n: f_th22n,
+            th24n: f_th24n,
+            settle: f_settle,
+            sched: f_sched,
+            sup: f_sup,
+            k: f_k,
+            jump_gate_until: f_jump_gate_until,
+            bad_gate_until: f_bad_gate_until,
+            last_reset: f_last_reset,
+            change_pending: f_change_pending,
+            bound_learned: f_bound_learned,
+            was_settled: f_was_settled,
+            last_good: f_last_good,
+            health: f_health,
+            counters: f_counters,
+            last_s: f_last_s,
+            last_relin: f_last_relin,
+            relins: f_relins,
+        } = self;
+        *f_cfg = *cfg;
+        *f_tc = TickConsts::of(cfg);
+        *f_f0_hz = cfg.f0_hz;
+        *f_om_ref = om_ref;
+        *f_inv_l0 = T::from_f64(1.0 / cfg.l0_um);
+        *f_accel_nd = T::from_f64(1.0 / (cfg.l0_um * 1e-6 * omega0 * omega0));
+        *f_th1n = th1n;
+        *f_th2n = th2n;
+        *f_sc1 = sc1;
+        *f_sc2 = sc2;
+        *f_w1 = w1;
+        *f_w2 = w2;
+        *f_gate_startup = samples(m.gate_startup_s);
+        *f_gate_jump = samples(m.gate_jump_s);
+        *f_gate_bad = samples(m.bad_input_gate_s);
+        *f_dither_rms = dither_amp / core::f64::consts::SQRT_2;
+        *f_exc_var_min = {
+            let v = m.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
+            T::from_f64(v * v)
+        };
+        *f_s_alpha = T::from_f64(1.0 / cfg.fs_hz);
+        *f_pump_ref_hz = 2.0 * cfg.f0_hz * om_ref;
+        *f_inv_2f0 = T::from_f64(1.0 / (2.0 * cfg.f0_hz));
+        *f_two_om_ref = T::from_f64(2.0 * om_ref);
+        *f_rep = None;
+        *f_rep_co = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts);
+        *f_rows = RowBuilder::new(w_svf, ts, nom);
+        *f_last_rows = RowSet::default();
+        *f_last_known = Known::default();
+        *f_rls1 = Rls::new(set1);
+        *f_rls2 = Rls::new(set2);
+        *f_det1 = ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold);
+        *f_det2 = ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold);
+        *f_stuck = StuckDetector::new(m.stuck_samples);
+        *f_exc = ExcitationMeter::new(1.0 / (0.5 * cfg.fs_hz));
+        *f_th14n = T::from_f64(th1n[3]);
+        *f_th22n = T::from_f64(th2n[1]);
+        *f_th24n = T::from_f64(th2n[3]);
+        *f_settle = SettleTest::new(every, need, t.settle_tol);
+        *f_sched = Scheduler::new(
             om_ref,
-            inv_l0: T::from_f64(1.0 / cfg.l0_um),
-            accel_nd: T::from_f64(1.0 / (cfg.l0_um * 1e-6 * omega0 * omega0)),
-            th1n,
-            th2n,
-            sc1,
-            sc2,
-            w1,
-            w2,
-            gate_startup: samples(m.gate_startup_s),
-            gate_jump: samples(m.gate_jump_s),
-            gate_bad: samples(m.bad_input_gate_s),
-            dither_rms: dither_amp / core::f64::consts::SQRT_2,
-            exc_var_min: {
-                let v = m.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
-                T::from_f64(v * v)
+            dither_amp,
+            cfg.dither.freq_hz / cfg.fs_hz,
+            cfg.dither.taper_s * cfg.fs_hz,
+            samples(cfg.dither.start_s),
+            cfg.dither.enabled,
+        )
+        .with_scale_dither(cfg.dither.scale_frac, cfg.dither.scale_freq_hz / cfg.fs_hz);
+        *f_sup = sup;
+        *f_k = 0;
+        *f_jump_gate_until = 0;
+        *f_bad_gate_until = 0;
+        *f_last_reset = 0;
+        *f_change_pending = false;
+        *f_bound_learned = false;
+        *f_was_settled = false;
+        *f_last_good = None;
+        *f_health = Health::default();
+        *f_counters = Counters::default();
+        *f_last_s = T::ONE;
+        *f_last_relin = 0;
+        *f_relins = 0;
+    }
+
+    /// A placeholder estimator with no design, to be [`Estimator::rebuild`]t in place
+    /// before use: every field is a constant, so a caller embedding it (the firmware's
+    /// `App`) gets it written straight into its final place, and `rebuild` then designs
+    /// into that place, with no estimator-sized temporary on the stack (on the chip the
+    /// estimator is ≈ 4.7 KB and the stack budget 16 KiB). Stepping a blank estimator
+    /// never panics, but its outputs mean nothing. Its configuration reads as
+    /// [`Config::table2`].
+    #[inline(always)]
+    pub fn blank() -> Self {
+        Estimator {
+            cfg: Config::table2(),
+            tc: TickConsts {
+                full_scale: T::ZERO,
+                accel_full_scale: T::ZERO,
+                p_reset: T::ZERO,
+                settle_window: 0,
+                relin_every: 0,
+                lim1: T::ZERO,
+                lim2: T::ZERO,
             },
-            s_alpha: T::from_f64(1.0 / cfg.fs_hz),
-            pump_ref_hz: 2.0 * cfg.f0_hz * om_ref,
-            inv_2f0: T::from_f64(1.0 / (2.0 * cfg.f0_hz)),
-            two_om_ref: T::from_f64(2.0 * om_ref),
+            f0_hz: 0.0,
+            om_ref: 0.0,
+            inv_l0: T::ZERO,
+            accel_nd: T::ZERO,
+            th1n: [0.0; 8],
+            th2n: [0.0; 6],
+            sc1: [T::ZERO; 8],
+            sc2: [T::ZERO; 6],
+            w1: [T::ZERO; NROWS],
+            w2: [T::ZERO; NROWS],
+            gate_startup: 0,
+            gate_jump: 0,
+            gate_bad: 0,
+            dither_rms: 0.0,
+            exc_var_min: T::ZERO,
+            s_alpha: T::ZERO,
+            pump_ref_hz: 0.0,
+            inv_2f0: T::ZERO,
+            two_om_ref: T::ZERO,
             rep: None,
-            rep_co,
-            rows: RowBuilder::new(w_svf, ts, nom),
+            rep_co: ReplicaCoeffs::blank(),
+            rows: RowBuilder::blank(),
             last_rows: RowSet::default(),
             last_known: Known::default(),
-            rls1: Rls::new(set1),
-            rls2: Rls::new(set2),
-            det1: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
-            det2: ChangeDetector::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
-            stuck: StuckDetector::new(m.stuck_samples),
-            exc: ExcitationMeter::new(1.0 / (0.5 * cfg.fs_hz)),
-            th14n: T::from_f64(th1n[3]),
-            th22n: T::from_f64(th2n[1]),
-            th24n: T::from_f64(th2n[3]),
-            settle: SettleTest::new(every, need, t.settle_tol),
-            sched: Scheduler::new(
-                om_ref,
-                dither_amp,
-                cfg.dither.freq_hz / cfg.fs_hz,
-                cfg.dither.taper_s * cfg.fs_hz,
-                samples(cfg.dither.start_s),
-                cfg.dither.enabled,
-            )
-            .with_scale_dither(cfg.dither.scale_frac, cfg.dither.scale_freq_hz / cfg.fs_hz),
-            sup,
+            rls1: Rls::blank(),
+            rls2: Rls::blank(),
+            det1: ChangeDetector::blank(),
+            det2: ChangeDetector::blank(),
+            stuck: StuckDetector::blank(),
+            exc: ExcitationMeter::blank(),
+            th14n: T::ZERO,
+            th22n: T::ZERO,
+            th24n: T::ZERO,
+            settle: SettleTest::blank(),
+            sched: Scheduler::blank(),
+            sup: Supervisor::blank(),
             k: 0,
             jump_gate_until: 0,
             bad_gate_until: 0,
@@ -416,6 +580,13 @@ impl<T: Real> Estimator<T> {
             last_relin: 0,
             relins: 0,
         }
+    }
+
+    /// Rebuilds this estimator in place from a validated configuration (the same
+    /// estimator [`Config::build`] returns, designed straight into `self`).
+    #[inline(never)] // the design's temporaries live in this frame only
+    pub fn rebuild(&mut self, cfg: ValidConfig<'_>) {
+        self.init_from(cfg.config());
     }
 
     /// The configuration this estimator was built from.
@@ -559,11 +730,13 @@ impl<T: Real> Estimator<T> {
         let x2 = self.rls2.estimate();
         let mut t1 = self.th1n;
         let mut t2 = self.th2n;
+        // the scaled deviation in T (one rounding in f32, none in f64: the host's f64
+        // values are unchanged), the sum with the nominal in f64
         for j in 0..8 {
-            t1[j] += self.sc1[j].to_f64() * x1[j].to_f64();
+            t1[j] += (self.sc1[j] * x1[j]).to_f64();
         }
         for j in 0..6 {
-            t2[j] += self.sc2[j].to_f64() * x2[j].to_f64();
+            t2[j] += (self.sc2[j] * x2[j]).to_f64();
         }
         (t1, t2)
     }
@@ -651,8 +824,8 @@ impl<T: Real> Estimator<T> {
     fn check(&mut self, s: &Sample<T>) -> InputCheck {
         let ch = s.lockin.channels();
         let mut c = InputCheck::default();
-        let fs = T::from_f64(self.cfg.monitor.full_scale_um);
-        let afs = T::from_f64(self.cfg.monitor.accel_full_scale_mps2);
+        let fs = self.tc.full_scale;
+        let afs = self.tc.accel_full_scale;
         for v in ch.iter() {
             if !v.is_finite() {
                 c.non_finite = true;
@@ -783,7 +956,7 @@ impl<T: Real> Estimator<T> {
                 let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
                 sum2 += inn.normalized_sq();
             }
-            let p = T::from_f64(self.cfg.rls.p_reset);
+            let p = self.tc.p_reset;
             if self.det1.push(k, sum1) {
                 self.rls1.reset_covariance(p);
                 self.counters.resets_drive += 1;
@@ -805,9 +978,9 @@ impl<T: Real> Estimator<T> {
         // ---- settle, excitation, health
         let wy2 = self.wy2_fast();
         if updated {
-            self.settle.push(k, wy2.to_f64());
+            self.settle.push(k, wy2);
         }
-        let window = (self.cfg.retune.settle_window_s * self.cfg.fs_hz) as u64;
+        let window = self.tc.settle_window;
         let settled = !gated && self.settle.settled() && k >= self.last_reset + window;
         if settled && !self.was_settled {
             events |= event::SETTLED;
@@ -824,7 +997,7 @@ impl<T: Real> Estimator<T> {
             }
         }
         self.was_settled = settled;
-        let relin_every = (self.cfg.rls.relinearize_s * self.cfg.fs_hz) as u64;
+        let relin_every = self.tc.relin_every;
         if relin_every > 0
             && updated
             && k >= self.last_relin + relin_every
@@ -835,8 +1008,7 @@ impl<T: Real> Estimator<T> {
         }
         let excitation_ok = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
         let (tr1, tr2) = (self.rls1.last_trace(), self.rls2.last_trace());
-        let lim1 = T::from_f64(self.cfg.rls.p0 * 8.0 * 1.0001);
-        let lim2 = T::from_f64(self.cfg.rls.p0 * 6.0 * 1.0001);
+        let (lim1, lim2) = (self.tc.lim1, self.tc.lim2);
         let covariance_bounded = tr1.is_finite()
             && tr2.is_finite()
             && tr1 <= lim1
@@ -929,6 +1101,13 @@ mod tests {
         let a = cfg.build::<f32>().unwrap();
         let b = cfg.validated().unwrap().build::<f32>();
         assert_eq!(std::format!("{a:?}"), std::format!("{b:?}"));
+        // built in place over a blank one (which steps without panicking)
+        let mut c = Estimator::<f32>::blank();
+        for k in 0..300 {
+            let _ = c.step(&sample(k, 21_000.0));
+        }
+        c.rebuild(cfg.validated().unwrap());
+        assert_eq!(std::format!("{a:?}"), std::format!("{c:?}"));
         assert_eq!(
             cfg.initial_pump_hz().to_bits(),
             a.initial_pump_hz().to_bits()

@@ -99,8 +99,31 @@ fn advance<T: Real>(z: (T, T), r: (T, T)) -> (T, T) {
 }
 
 impl<T: Real> Scheduler<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        Scheduler {
+            om_ref: 0.0,
+            centre: 0.0,
+            ramp: None,
+            dither_amp: T::ZERO,
+            dither_z: (T::ONE, T::ZERO),
+            dither_rot: (T::ONE, T::ZERO),
+            dither_on: false,
+            env: T::ZERO,
+            env_step: T::ZERO,
+            dither_start_k: 0,
+            scale_amp: T::ZERO,
+            scale_z: (T::ONE, T::ZERO),
+            scale_rot: (T::ONE, T::ZERO),
+            scale_cmd: T::ONE,
+        }
+    }
+
     /// `om_ref` the reference ω; dither amplitude (ω units), frequency (cycles per
     /// sample), taper length (samples), start sample, enabled.
+    #[inline(never)] // set-up only: its own frame (the chip's stack)
     pub fn new(
         om_ref: f64,
         dither_amp: f64,

@@ -30,6 +30,20 @@ pub struct SynthTables<T> {
 }
 
 impl<T: Real> SynthTables<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        SynthTables {
+            c1: [T::ZERO; NSYN],
+            s1: [T::ZERO; NSYN],
+            c2: [T::ZERO; NSYN],
+            s2: [T::ZERO; NSYN],
+            c3: [T::ZERO; NSYN],
+            s3: [T::ZERO; NSYN],
+        }
+    }
+
     /// Builds the tables (design time).
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new() -> Self {

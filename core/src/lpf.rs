@@ -105,13 +105,10 @@ pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
         scale *= 0.5;
         squarings += 1;
     }
-    let mut xs = [[0.0; MAXAUG]; MAXAUG];
-    for i in 0..m {
-        for j in 0..m {
-            xs[i][j] = x[i][j] * scale;
-        }
-    }
-    // Taylor: E = I + X + X²/2! + ...
+    // Taylor: E = I + X + X²/2! + ... with X = x·scale, formed in place (the design runs
+    // on the chip's stack): row i of term·X needs only row i of term, so each new row goes
+    // through a one-row buffer; term·(x·scale) = (term·x)·scale exactly, scale being a
+    // power of two, and every sum runs in the order of a plain product.
     let mut e = [[0.0; MAXAUG]; MAXAUG];
     let mut term = [[0.0; MAXAUG]; MAXAUG];
     for i in 0..m {
@@ -119,11 +116,11 @@ pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
         term[i][i] = 1.0;
     }
     for k in 1..=20 {
-        term = matmul(&term, &xs, m);
         let inv = 1.0 / k as f64;
-        for row in term.iter_mut().take(m) {
-            for v in row.iter_mut().take(m) {
-                *v *= inv;
+        for i in 0..m {
+            let row = row_times(&term[i], x, m);
+            for j in 0..m {
+                term[i][j] = row[j] * scale * inv;
             }
         }
         for i in 0..m {
@@ -132,30 +129,30 @@ pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
             }
         }
     }
+    // squarings: E·E needs every row of E, so through a copy (term is free now)
     for _ in 0..squarings {
-        e = matmul(&e, &e, m);
+        term = e;
+        for i in 0..m {
+            e[i] = row_times(&term[i], &term, m);
+        }
     }
     e
 }
 
-fn matmul(
-    a: &[[f64; MAXAUG]; MAXAUG],
-    b: &[[f64; MAXAUG]; MAXAUG],
-    m: usize,
-) -> [[f64; MAXAUG]; MAXAUG] {
-    let mut r = [[0.0; MAXAUG]; MAXAUG];
-    for i in 0..m {
-        for k in 0..m {
-            let aik = a[i][k];
-            if aik == 0.0 {
-                continue;
-            }
-            for j in 0..m {
-                r[i][j] += aik * b[k][j];
-            }
+/// Row `a` (first `m` entries) times the `m × m` block of `b`, summed in the order of a
+/// plain matrix product (zero entries of `a` skipped).
+#[inline(never)]
+fn row_times(a: &[f64; MAXAUG], b: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [f64; MAXAUG] {
+    let mut row = [0.0; MAXAUG];
+    for (aik, bk) in a.iter().zip(b.iter()).take(m) {
+        if *aik == 0.0 {
+            continue;
+        }
+        for j in 0..m {
+            row[j] += aik * bk[j];
         }
     }
-    r
+    row
 }
 
 /// FOH-exact discretisation of an analog SISO model at period `ts`:
@@ -186,15 +183,19 @@ pub fn foh_discretise(sys: &Analog, ts: f64) -> FohDiscrete {
     }
     m[n][n + 1] = 1.0;
     let e = expm(&m, n + 2);
-    let mut phi = [[0.0; MAX_ORDER]; MAX_ORDER];
-    let mut g0 = [0.0; MAX_ORDER];
-    let mut g1 = [0.0; MAX_ORDER];
+    // filled in the returned value (no second copy on the chip's stack)
+    let mut d = FohDiscrete {
+        n,
+        phi: [[0.0; MAX_ORDER]; MAX_ORDER],
+        g0: [0.0; MAX_ORDER],
+        g1: [0.0; MAX_ORDER],
+    };
     for i in 0..n {
-        phi[i][..n].copy_from_slice(&e[i][..n]);
-        g0[i] = e[i][n];
-        g1[i] = e[i][n + 1];
+        d.phi[i][..n].copy_from_slice(&e[i][..n]);
+        d.g0[i] = e[i][n];
+        d.g1[i] = e[i][n + 1];
     }
-    FohDiscrete { n, phi, g0, g1 }
+    d
 }
 
 /// Runtime coefficients of the replica filter in the estimator's precision.
@@ -215,6 +216,22 @@ pub struct ReplicaCoeffs<T> {
 }
 
 impl<T: Real> ReplicaCoeffs<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        ReplicaCoeffs {
+            n: 0,
+            phi: [[T::ZERO; MAX_ORDER]; MAX_ORDER],
+            g0: [T::ZERO; MAX_ORDER],
+            g1: [T::ZERO; MAX_ORDER],
+            c: [T::ZERO; MAX_ORDER],
+            ca: [T::ZERO; MAX_ORDER],
+            cb: T::ZERO,
+            rest_unit: [T::ZERO; MAX_ORDER],
+        }
+    }
+
     /// Designs the replica of an order-`order` Butterworth with cut-off `wc` (rad per
     /// time unit), sampled every `ts` time units.
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
@@ -424,6 +441,104 @@ mod tests {
                 (mag(&s, 1.0) - core::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12,
                 "order {n}"
             );
+        }
+    }
+
+    /// The matrix exponential as first written (four matrices, products by value).
+    fn expm_reference(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
+        fn matmul(
+            a: &[[f64; MAXAUG]; MAXAUG],
+            b: &[[f64; MAXAUG]; MAXAUG],
+            m: usize,
+        ) -> [[f64; MAXAUG]; MAXAUG] {
+            let mut r = [[0.0; MAXAUG]; MAXAUG];
+            for i in 0..m {
+                for k in 0..m {
+                    let aik = a[i][k];
+                    if aik == 0.0 {
+                        continue;
+                    }
+                    for j in 0..m {
+                        r[i][j] += aik * b[k][j];
+                    }
+                }
+            }
+            r
+        }
+        let m = m.min(MAXAUG);
+        let mut norm = 0.0f64;
+        for row in x.iter().take(m) {
+            let s: f64 = row.iter().take(m).map(|v| libm::fabs(*v)).sum();
+            norm = norm.max(s);
+        }
+        let mut squarings = 0u32;
+        let mut scale = 1.0;
+        while norm * scale > 0.25 && squarings < 60 {
+            scale *= 0.5;
+            squarings += 1;
+        }
+        let mut xs = [[0.0; MAXAUG]; MAXAUG];
+        for i in 0..m {
+            for j in 0..m {
+                xs[i][j] = x[i][j] * scale;
+            }
+        }
+        let mut e = [[0.0; MAXAUG]; MAXAUG];
+        let mut term = [[0.0; MAXAUG]; MAXAUG];
+        for i in 0..m {
+            e[i][i] = 1.0;
+            term[i][i] = 1.0;
+        }
+        for k in 1..=20 {
+            term = matmul(&term, &xs, m);
+            let inv = 1.0 / k as f64;
+            for row in term.iter_mut().take(m) {
+                for v in row.iter_mut().take(m) {
+                    *v *= inv;
+                }
+            }
+            for i in 0..m {
+                for j in 0..m {
+                    e[i][j] += term[i][j];
+                }
+            }
+        }
+        for _ in 0..squarings {
+            e = matmul(&e, &e, m);
+        }
+        e
+    }
+
+    #[test]
+    fn expm_in_place_equals_the_reference_bit_for_bit() {
+        // the FOH augmented matrices of every order at several corners, and dense ones
+        for order in 1..=MAX_ORDER {
+            for &(wc, ts) in &[(0.02, 0.5), (0.2, 1.3), (3.0, 0.9), (40.0, 2.0)] {
+                let sys = butterworth(order, wc);
+                let n = sys.n;
+                let mut m = [[0.0; MAXAUG]; MAXAUG];
+                for i in 0..n {
+                    for j in 0..n {
+                        m[i][j] = sys.a[i][j] * ts;
+                    }
+                    m[i][n] = sys.b[i] * ts;
+                }
+                m[n][n + 1] = 1.0;
+                assert_eq!(expm(&m, n + 2), expm_reference(&m, n + 2), "order {order}");
+            }
+        }
+        let mut s: u64 = 7;
+        for size in 1..=MAXAUG {
+            let mut x = [[0.0; MAXAUG]; MAXAUG];
+            for row in x.iter_mut().take(size) {
+                for v in row.iter_mut().take(size) {
+                    s = s
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    *v = ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 6.0;
+                }
+            }
+            assert_eq!(expm(&x, size), expm_reference(&x, size), "size {size}");
         }
     }
 

@@ -46,6 +46,17 @@ pub struct StuckDetector<T> {
 }
 
 impl<T: Real> StuckDetector<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        StuckDetector {
+            last: [T::ZERO; N_LOCKIN_CH],
+            repeats: [0; N_LOCKIN_CH],
+            limit: 0,
+        }
+    }
+
     /// `limit` repeats make a channel stuck (0 disables).
     pub fn new(limit: u32) -> Self {
         StuckDetector {
@@ -87,6 +98,20 @@ pub struct ChangeDetector<T> {
 }
 
 impl<T: Real> ChangeDetector<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        ChangeDetector {
+            level: T::ZERO,
+            nominal: T::ZERO,
+            alpha: T::ZERO,
+            threshold: T::ZERO,
+            hold: 0,
+            last_alarm: None,
+        }
+    }
+
     /// `nominal` level (number of rows), EWMA weight, threshold, hold (samples).
     pub fn new(nominal: f64, alpha: f64, threshold: f64, hold: u64) -> Self {
         ChangeDetector {
@@ -139,6 +164,17 @@ pub struct ExcitationMeter<T> {
 }
 
 impl<T: Real> ExcitationMeter<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        ExcitationMeter {
+            mean: T::ZERO,
+            var: T::ZERO,
+            alpha: T::ZERO,
+        }
+    }
+
     /// EWMA weight per sample.
     pub fn new(alpha: f64) -> Self {
         ExcitationMeter {
@@ -163,30 +199,47 @@ impl<T: Real> ExcitationMeter<T> {
 /// Capacity of the settle window ring.
 pub const SETTLE_RING: usize = 16;
 
-/// Settle test on one scalar, sampled at a low rate into a small ring.
+/// Settle test on one scalar, sampled at a low rate into a small ring, in the
+/// estimator's precision `T` (the values are `T` in the first place; in `f64` on the chip
+/// it was ~2k soft-float instructions on every 25th tick).
 #[derive(Clone, Copy, Debug)]
-pub struct SettleTest {
-    ring: [f64; SETTLE_RING],
+pub struct SettleTest<T> {
+    ring: [T; SETTLE_RING],
     len: usize,
     pos: usize,
     every: u64,
     need: usize,
-    tol: f64,
+    tol: T,
     /// The verdict, recomputed when a value is pushed (the tick only reads it).
     verdict: bool,
 }
 
-impl SettleTest {
+impl<T: Real> SettleTest<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        SettleTest {
+            ring: [T::ZERO; SETTLE_RING],
+            len: 0,
+            pos: 0,
+            every: 1,
+            need: 1,
+            tol: T::ZERO,
+            verdict: false,
+        }
+    }
+
     /// Keeps one value every `every` samples; settled when the last `need` (≤ 16)
     /// values span less than `tol` relative.
     pub fn new(every: u64, need: usize, tol: f64) -> Self {
         SettleTest {
-            ring: [0.0; SETTLE_RING],
+            ring: [T::ZERO; SETTLE_RING],
             len: 0,
             pos: 0,
             every: every.max(1),
             need: need.clamp(2, SETTLE_RING),
-            tol,
+            tol: T::from_f64(tol),
             verdict: false,
         }
     }
@@ -197,7 +250,7 @@ impl SettleTest {
         self.verdict = false;
     }
     /// Feeds the value at sample `k`.
-    pub fn push(&mut self, k: u64, v: f64) {
+    pub fn push(&mut self, k: u64, v: T) {
         if !k.is_multiple_of(self.every) {
             return;
         }
@@ -218,14 +271,16 @@ impl SettleTest {
         if self.len < self.need {
             return false;
         }
-        let mut lo = f64::MAX;
-        let mut hi = f64::MIN;
+        // finite values only (push clears on a non-finite one), so `Real::min/max` agree
+        // with `f64::min/max`
+        let mut lo = T::MAX;
+        let mut hi = -T::MAX;
         for i in 0..self.need {
             let idx = (self.pos + SETTLE_RING - 1 - i) % SETTLE_RING;
             lo = lo.min(self.ring[idx]);
             hi = hi.max(self.ring[idx]);
         }
-        let scale = libm::fabs(hi).max(libm::fabs(lo)).max(1e-30);
+        let scale = hi.abs().max(lo.abs()).max(T::from_f64(1e-30));
         (hi - lo) / scale < self.tol
     }
 }
@@ -300,7 +355,7 @@ mod tests {
 
     #[test]
     fn settle_and_excitation() {
-        let mut st = SettleTest::new(50, 6, 2e-5);
+        let mut st = SettleTest::<f64>::new(50, 6, 2e-5);
         for k in 0..300u64 {
             st.push(k, 1.03 + 1e-3 * (-(k as f64) / 20.0).exp());
         }

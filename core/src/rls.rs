@@ -321,11 +321,36 @@ pub struct Rls<T: Real, const N: usize> {
 }
 
 impl<T: Real, const N: usize> Rls<T, N> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        Rls {
+            settings: RlsSettings {
+                forgetting: T::ONE,
+                p0: T::ONE,
+                trace_max: T::MAX,
+            },
+            x: [T::ZERO; N],
+            u: [[T::ZERO; N]; N],
+            d: [T::ZERO; N],
+            stats: RlsStats {
+                updates: 0,
+                skipped_non_finite: 0,
+                forgetting_skipped: 0,
+                d_floor_hits: 0,
+                resets: 0,
+            },
+            last_trace: T::ZERO,
+        }
+    }
+
     /// A filter with estimate `x = 0`, `P = p0·I` and zeroed statistics.
     ///
     /// The settings are used as given; validate them first ([`RlsSettings::new`] or
     /// [`Rls::try_new`]). Invalid settings cannot make the filter panic, but e.g. a NaN
     /// `p0` makes every update be rejected.
+    #[inline(never)] // set-up only: its own frame (the chip's stack)
     pub fn new(settings: RlsSettings<T>) -> Self {
         let mut u = [[T::ZERO; N]; N];
         for (i, row) in u.iter_mut().enumerate() {

@@ -87,6 +87,18 @@ pub struct NominalConsts<T> {
 }
 
 impl<T: Real> NominalConsts<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        NominalConsts {
+            th1: [T::ZERO; 8],
+            th2: [T::ZERO; 6],
+            c12: [T::ZERO; 3],
+            c22: [T::ZERO; 3],
+        }
+    }
+
     /// From the nominal θ (f64) and the reference ω.
     pub fn new(th1: &[f64; 8], th2: &[f64; 6], om_ref: f64) -> Self {
         let mut t1 = [T::ZERO; 8];
@@ -183,7 +195,22 @@ pub struct RowBuilder<T> {
 }
 
 impl<T: Real> RowBuilder<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        RowBuilder {
+            svf: SvfCoeffs::blank(),
+            tables: SynthTables::blank(),
+            nom: NominalConsts::blank(),
+            h: [HarmFilters::default(); 2],
+            dc: DcFilters::default(),
+            started: false,
+        }
+    }
+
     /// A builder for SVF corner `w` (rad/τ), sample period `ts` (τ), nominal constants.
+    #[inline(never)] // set-up only: its own frame (the chip's stack)
     pub fn new(w: f64, ts: f64, nom: NominalConsts<T>) -> Self {
         RowBuilder {
             svf: SvfCoeffs::new(w, ts),

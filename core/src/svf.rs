@@ -48,6 +48,22 @@ pub struct SvfCoeffs<T> {
 }
 
 impl<T: Real> SvfCoeffs<T> {
+    /// A placeholder with no design (all zero), built in place by
+    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
+    #[inline(always)]
+    pub(crate) fn blank() -> Self {
+        SvfCoeffs {
+            a: T::ZERO,
+            one_minus_a: T::ZERO,
+            ha: T::ZERO,
+            c2: T::ZERO,
+            g1: T::ZERO,
+            g2: T::ZERO,
+            w: T::ZERO,
+            w2: T::ZERO,
+        }
+    }
+
     /// Coefficients for corner `w` (rad per time unit) sampled every `ts` time units.
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new(w: f64, ts: f64) -> Self {

@@ -501,22 +501,28 @@ where
         cal_y: LockinCalibration,
         guard: PumpGuard,
     ) -> Result<Self, ConfigError> {
-        let valid = cfg.validated()?;
-        let sysclk = chips.dds.sysclk_hz();
-        guard.validate(sysclk, cfg.initial_pump_hz())?;
-        let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
-        let guard_words = (word(guard.min_hz), word(guard.max_hz));
-        Ok(Self {
-            // first, straight into the returned value (no estimator-sized temporary)
-            est: valid.build::<f32>(),
+        let mut app = Self::unconfigured(chips);
+        app.configure(cfg, cal_x, cal_y, guard)?;
+        Ok(app)
+    }
+
+    /// Binds initialised chips to a blank estimator (`Estimator::blank`): every field a
+    /// constant, so the App is written straight into the caller's place. It must be
+    /// [`App::configure`]d before [`App::start`] (which fails until then: the blank
+    /// estimator's pump is 0 Hz, outside every guard). The boards build their App this
+    /// way so that the estimator is designed in place, not moved (stack, docs/firmware.md).
+    #[inline(never)]
+    pub fn unconfigured(chips: Chips<AX, AY, XL, DDS>) -> Self {
+        Self {
+            est: Estimator::blank(),
             chips,
-            cal_x,
-            cal_y,
-            guard,
-            guard_words,
+            cal_x: LockinCalibration::UNITY,
+            cal_y: LockinCalibration::UNITY,
+            guard: PumpGuard::new(0.0, 0.0),
+            guard_words: (0, 0),
             amplitude: PumpAmplitude::UNITY,
-            lockin_beyond_um: beyond(cfg.monitor.full_scale_um),
-            accel_beyond_mps2: beyond(cfg.monitor.accel_full_scale_mps2),
+            lockin_beyond_um: 0.0,
+            accel_beyond_mps2: 0.0,
             pump: None,
             dirty: true,
             counters: FwCounters::default(),
@@ -526,7 +532,43 @@ where
                 pump_hz: f64::NAN,
                 pump_scale: f32::NAN,
             },
-        })
+        }
+    }
+
+    /// Validates `cfg` and the guard as [`App::new`] does and, if both pass, builds the
+    /// `f32` estimator from `cfg` in place (the design's temporaries live only during
+    /// this call) and resets the App to its start: calibrations, guard, amplitude mapping
+    /// [`PumpAmplitude::UNITY`], no pump known, counters zero. On an error nothing changes.
+    #[inline(never)]
+    pub fn configure(
+        &mut self,
+        cfg: &Config,
+        cal_x: LockinCalibration,
+        cal_y: LockinCalibration,
+        guard: PumpGuard,
+    ) -> Result<(), ConfigError> {
+        let valid = cfg.validated()?;
+        let sysclk = self.chips.dds.sysclk_hz();
+        guard.validate(sysclk, cfg.initial_pump_hz())?;
+        let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
+        self.guard_words = (word(guard.min_hz), word(guard.max_hz));
+        self.est.rebuild(valid);
+        self.cal_x = cal_x;
+        self.cal_y = cal_y;
+        self.guard = guard;
+        self.amplitude = PumpAmplitude::UNITY;
+        self.lockin_beyond_um = beyond(cfg.monitor.full_scale_um);
+        self.accel_beyond_mps2 = beyond(cfg.monitor.accel_full_scale_mps2);
+        self.pump = None;
+        self.dirty = true;
+        self.counters = FwCounters::default();
+        self.last = Sample {
+            lockin: lockin([f32::NAN; LOCKIN_CHANNELS], [f32::NAN; LOCKIN_CHANNELS]),
+            accel_mps2: [f32::NAN; 2],
+            pump_hz: f64::NAN,
+            pump_scale: f32::NAN,
+        };
+        Ok(())
     }
 
     /// Changes the amplitude mapping (validated; field `"pump_amplitude"`). The next

@@ -88,20 +88,32 @@ fn range_of(bits: u32) -> Option<Range> {
     }
 }
 
+/// The replay board's chips: [`ReplayApp`]'s.
+pub type ReplayChips<'a> = Chips<ReplayAdc<'a>, ReplayAdc<'a>, ReplayAccel<'a>, CaptureDds<'a>>;
+
 /// Builds the replay board over `table`, initialises the chips through their drivers,
 /// creates the [`App`] with the table's configuration and starts the pump (through `io`,
-/// the DDS capture's IO_UPDATE line). Never inlined: the set-up's temporaries (the
-/// estimator's design) then live in this frame, which is gone when the ticks run.
-#[inline(never)]
+/// the DDS capture's IO_UPDATE line): [`replay_chips`], [`App::unconfigured`] and
+/// [`configure_replay`], which the qemu board calls one by one so that its App is built
+/// in its final place.
 pub fn replay_app<'a, D: DelayNs>(
     table: ReplayTable<'a>,
     dds: &'a DdsCapture,
     io: &mut CaptureIo<'a>,
     delay: &mut D,
 ) -> Result<ReplayApp<'a>, SetupError> {
-    let cfg = table.config();
-    let cal_x = calibration(table.um_per_volt_x());
-    let cal_y = calibration(table.um_per_volt_y());
+    let mut app = App::unconfigured(replay_chips(table, dds, delay)?);
+    configure_replay(&mut app, table, io)?;
+    Ok(app)
+}
+
+/// The replay devices over `table` behind the real drivers, initialised.
+#[inline(never)]
+pub fn replay_chips<'a, D: DelayNs>(
+    table: ReplayTable<'a>,
+    dds: &'a DdsCapture,
+    delay: &mut D,
+) -> Result<ReplayChips<'a>, SetupError> {
     let mut adc_x = Ads131m08::new(ReplayAdc::from_table(table, 0));
     let mut adc_y = Ads131m08::new(ReplayAdc::from_table(table, 1));
     adc_x
@@ -117,18 +129,33 @@ pub fn replay_app<'a, D: DelayNs>(
         .map_err(|_| SetupError::Accel)?;
     let mut dds_drv = Ad9959::new(dds.spi(), DEFAULT_SYSCLK_HZ);
     dds_drv.init().map_err(|_| SetupError::Dds)?;
-    let chips = Chips {
+    Ok(Chips {
         adc_x,
         adc_y,
         accel,
         dds: dds_drv,
-    };
+    })
+}
+
+/// Configures `app` with the table's configuration, calibrations and guard (the
+/// estimator designed in place, [`App::configure`]), sets the replay's amplitude mapping
+/// and starts the pump. Never inlined: the design's temporaries live in this call only.
+#[inline(never)]
+pub fn configure_replay<'a>(
+    app: &mut ReplayApp<'a>,
+    table: ReplayTable<'a>,
+    io: &mut CaptureIo<'a>,
+) -> Result<(), SetupError> {
+    let cfg = table.config();
+    let cal_x = calibration(table.um_per_volt_x());
+    let cal_y = calibration(table.um_per_volt_y());
     let guard = PumpGuard::around(cfg.pump_centre_hz, GUARD_HALF_WIDTH_HZ);
-    let mut app = App::new(chips, &cfg, cal_x, cal_y, guard).map_err(SetupError::Config)?;
+    app.configure(&cfg, cal_x, cal_y, guard)
+        .map_err(SetupError::Config)?;
     app.set_pump_amplitude(AMPLITUDE)
         .map_err(SetupError::Config)?;
     app.start(io).map_err(|_| SetupError::Dds)?;
-    Ok(app)
+    Ok(())
 }
 
 /// Gives the core the table's control events listed for tick `k` (before the tick, as

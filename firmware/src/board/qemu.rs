@@ -38,6 +38,7 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use embedded_hal::delay::DelayNs;
+use paragyro_firmware::app::App;
 use paragyro_firmware::drivers::ad9959::DEFAULT_SYSCLK_HZ;
 use paragyro_firmware::replay::DdsCapture;
 use paragyro_firmware::run::{self, ReplayCheck};
@@ -138,15 +139,21 @@ fn replay(syst: &mut SYST) -> bool {
     );
     let dds = DdsCapture::new(DEFAULT_SYSCLK_HZ);
     let mut io = dds.io_update();
-    // the App stays where `replay_app` returned it (no 5 KB move out of the Result)
-    let mut setup = run::replay_app(table, &dds, &mut io, &mut NoWait);
-    let app = match &mut setup {
-        Ok(a) => a,
+    // the App is built in its final place (blank estimator, every field a constant) and
+    // the estimator designed into it: no estimator- or App-sized temporary on the stack
+    let chips = match run::replay_chips(table, &dds, &mut NoWait) {
+        Ok(c) => c,
         Err(e) => {
-            defmt::error!("board setup failed: {}", defmt::Debug2Format(e));
+            defmt::error!("board setup failed: {}", defmt::Debug2Format(&e));
             return false;
         }
     };
+    let mut app = App::unconfigured(chips);
+    if let Err(e) = run::configure_replay(&mut app, table, &mut io) {
+        defmt::error!("board setup failed: {}", defmt::Debug2Format(&e));
+        return false;
+    }
+    let app = &mut app;
     #[cfg(feature = "capture")]
     super::capture_header(&table.config());
     if let Some(n) = option_env!("PARAGYRO_PROFILE_TICKS") {

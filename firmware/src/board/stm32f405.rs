@@ -171,17 +171,21 @@ fn main() -> ! {
         dds,
     };
     let guard = PumpGuard::around(cfg.pump_centre_hz, GUARD_HALF_WIDTH_HZ);
-    // the App stays where `App::new` returned it (no 5 KB move out of the Result)
-    let mut created = App::new(
-        chips,
-        &cfg,
-        calibration(CAL_X_UM_PER_VOLT),
-        calibration(CAL_Y_UM_PER_VOLT),
-        guard,
-    );
-    let Ok(app) = &mut created else {
+    // the App is built in its final place (blank estimator, every field a constant) and
+    // the estimator designed into it: no estimator- or App-sized temporary on the stack
+    let mut app = App::unconfigured(chips);
+    if app
+        .configure(
+            &cfg,
+            calibration(CAL_X_UM_PER_VOLT),
+            calibration(CAL_Y_UM_PER_VOLT),
+            guard,
+        )
+        .is_err()
+    {
         fail("configuration rejected")
-    };
+    }
+    let app = &mut app;
     if app
         .set_pump_amplitude(PumpAmplitude {
             base_scale: 1.0,
