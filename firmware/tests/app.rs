@@ -1011,3 +1011,51 @@ fn capture_dds_records_buffers_and_applies_them_on_io_update() {
     let dds = dds.destroy();
     assert_eq!(dds.capture().transactions(), t + 1);
 }
+
+// ------------------------------------------------------------------------------------------
+// the boards' in-place construction: unconfigured, then configured
+
+#[test]
+fn unconfigured_app_cannot_start_and_configured_app_equals_new() {
+    let n = 300;
+    let d = data(n);
+    let cap = DdsCapture::new(SYSCLK);
+    let mut io = cap.io_update();
+    let mut app = App::unconfigured(chips(
+        ReplayAdc::new(&d.x, cal_x()),
+        ReplayAdc::new(&d.y, cal_y()),
+        ReplayAccel::new(&d.acc),
+        &cap,
+    ));
+    // no pump can be planned before the configuration: nothing reaches the DDS
+    assert!(app.start(&mut io).is_err());
+    assert_eq!(cap.pulses(), 0);
+    let cfg = Config::table2();
+    let mut bad = cfg;
+    bad.fs_hz = f64::NAN;
+    assert_eq!(
+        app.configure(&bad, cal_x(), cal_y(), guard(&cfg))
+            .unwrap_err()
+            .field,
+        "fs_hz"
+    );
+    app.configure(&cfg, cal_x(), cal_y(), guard(&cfg)).unwrap();
+    // the same App as App::new: same estimator, same ticks
+    let cap2 = DdsCapture::new(SYSCLK);
+    let mut io2 = cap2.io_update();
+    let mut reference = clean(&d, &cap2);
+    assert_eq!(
+        format!("{:?}", app.estimator()),
+        format!("{:?}", reference.estimator())
+    );
+    let p1 = app.start(&mut io).unwrap();
+    let p2 = reference.start(&mut io2).unwrap();
+    assert_eq!(p1.pump_hz().to_bits(), p2.pump_hz().to_bits());
+    for k in 0..n {
+        let a = app.tick(&mut io);
+        let b = reference.tick(&mut io2);
+        same_output(&a.out, &b.out, k);
+        assert_eq!(a.pump_hz.to_bits(), b.pump_hz.to_bits(), "tick {k}");
+    }
+    assert_eq!(app.estimator().theta(), reference.estimator().theta());
+}
