@@ -53,6 +53,19 @@ use crate::record::{Record, config_for};
 
 /// Rows per sample (5 drive, then 5 sense).
 pub const NR: usize = 2 * NROWS;
+/// Names of the rows.
+pub const ROW_LABELS: [&str; NR] = [
+    "drive/DC",
+    "drive/1st in-phase",
+    "drive/1st quadrature",
+    "drive/3rd in-phase",
+    "drive/3rd quadrature",
+    "sense/DC",
+    "sense/1st in-phase",
+    "sense/1st quadrature",
+    "sense/3rd in-phase",
+    "sense/3rd quadrature",
+];
 
 /// Significance: |size| / σ(size) (cluster-robust) at least this.
 pub const T_SIG: f64 = 5.0;
@@ -68,6 +81,12 @@ pub const NOISE_ROW_ENERGY: f64 = 1.08;
 /// The verdict's effect(s) may leave at most this share of the held-out gap above the noise
 /// unexplained; otherwise the answer is `unknown` (something else is there too).
 pub const UNEXPLAINED_MAX: f64 = 0.05;
+/// Per-row residual check: a row holding at least this share of the held-out gap …
+pub const ROW_GAP_SHARE: f64 = 0.02;
+/// … and at least this much gap energy per sample (noise ≈ 1) …
+pub const ROW_GAP_MIN: f64 = 0.05;
+/// … must not be left more than this fraction unexplained by the verdict.
+pub const ROW_UNEXPLAINED_MAX: f64 = 0.5;
 /// A second effect is reported when it adds at least this share of the explainable gap.
 pub const SECOND_MIN: f64 = 0.15;
 /// Candidates whose columns correlate at least this much (after the rate is projected
@@ -1506,18 +1525,39 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     } else {
         0.0
     };
+    // and it must explain every row where the gap lives, not just the energy in total: a
+    // row holding a share of the gap that the verdict leaves mostly unexplained means
+    // something else is there (e.g. a quadratic stiffness: its drive DC and 1st quadrature)
+    let unexplained_rows: Vec<usize> = if verdict_cols.is_empty() {
+        Vec::new()
+    } else {
+        let e_b = row_energy(&base_fit, &y, &cols, &usable, hold.clone());
+        let e_a = row_energy(&after_fit, &y, &cols, &usable, hold.clone());
+        let e_f = row_energy(&floor_fit, &y, &cols, &usable, hold.clone());
+        let g0: Vec<f64> = (0..NR).map(|i| e_b[i] - e_f[i].min(e_a[i])).collect();
+        let tot: f64 = g0.iter().map(|v| v.max(0.0)).sum();
+        (0..NR)
+            .filter(|&i| {
+                let ga = e_a[i] - e_f[i].min(e_a[i]);
+                g0[i] > ROW_GAP_SHARE * tot
+                    && g0[i] > ROW_GAP_MIN
+                    && ga > ROW_UNEXPLAINED_MAX * g0[i]
+            })
+            .collect()
+    };
     let closest = verdict.clone();
-    let (verdict, verdict_cols, secondary, after_fit) =
-        if !verdict_cols.is_empty() && unexplained > UNEXPLAINED_MAX {
-            (
-                "unknown".to_string(),
-                Vec::new(),
-                None,
-                bank.fit(&base_cols),
-            )
-        } else {
-            (verdict, verdict_cols, secondary, after_fit)
-        };
+    let (verdict, verdict_cols, secondary, after_fit) = if !verdict_cols.is_empty()
+        && (unexplained > UNEXPLAINED_MAX || !unexplained_rows.is_empty())
+    {
+        (
+            "unknown".to_string(),
+            Vec::new(),
+            None,
+            bank.fit(&base_cols),
+        )
+    } else {
+        (verdict, verdict_cols, secondary, after_fit)
+    };
     let gap_before = explainable;
     let gap_after = (after_fit.e_hold - e_floor).max(0.0);
 
@@ -1530,6 +1570,30 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
             }
         }
         r
+    };
+    // held-out energy per row (per sample): baseline, the closest library effect, everything
+    let closest_fit = if closest == "none" || closest == "unknown" || lib_cols(&closest).is_empty()
+    {
+        base_fit.clone()
+    } else {
+        bank.fit(&with(&lib_cols(&closest)))
+    };
+    let by_row = {
+        let mut acc = [[0.0f64; 3]; NR];
+        let mut cnt = 0usize;
+        for k in hold.clone().filter(|&k| usable[k]) {
+            cnt += 1;
+            for (j, f) in [&base_fit, &closest_fit, &floor_fit].iter().enumerate() {
+                let r = resid(f, k);
+                for i in 0..NR {
+                    acc[i][j] += r[i] * r[i];
+                }
+            }
+        }
+        let c = cnt.max(1) as f64;
+        (0..NR)
+            .map(|i| json!({"row": i, "baseline": acc[i][0] / c, "closest": acc[i][1] / c, "everything": acc[i][2] / c}))
+            .collect::<Vec<_>>()
     };
     let ks: Vec<usize> = (first..=last).filter(|&k| usable[k]).collect();
     let mut share = [0.0f64; NR];
@@ -1766,7 +1830,9 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         "gap_closure": if gap_before > 0.0 { 1.0 - gap_after / gap_before } else { 0.0 },
         "gap_fraction_of_baseline": gap_fraction,
         "unexplained_above_noise": unexplained,
+        "unexplained_rows": unexplained_rows.iter().map(|&i| ROW_LABELS[i]).collect::<Vec<_>>(),
         "closest_library_effect": closest,
+        "held_out_by_row": by_row,
         "energies": {
             "note": "weighted row energy on the held-out span (unit-noise rows: noise alone gives about one per row)",
             "baseline": e0,
@@ -1792,7 +1858,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
             "guard_s": GUARD_S,
             "held_out": [hold_t.0, hold_t.1],
         },
-        "thresholds": {"t_sig": T_SIG, "gap_min": GAP_MIN, "share_min": SHARE_MIN, "second_min": SECOND_MIN, "coherent": COHERENT, "noise_row_energy": NOISE_ROW_ENERGY, "unexplained_max": UNEXPLAINED_MAX},
+        "thresholds": {"t_sig": T_SIG, "gap_min": GAP_MIN, "share_min": SHARE_MIN, "second_min": SECOND_MIN, "coherent": COHERENT, "noise_row_energy": NOISE_ROW_ENERGY, "unexplained_max": UNEXPLAINED_MAX, "row_gap_share": ROW_GAP_SHARE, "row_gap_min": ROW_GAP_MIN, "row_unexplained_max": ROW_UNEXPLAINED_MAX},
         "vibration_beat_scan": {"range_hz": VIB_BEAT_MAX_HZ, "best_hz": beat},
         "separating_excitation": separating(&ranking),
         "samples": n,
@@ -1887,6 +1953,29 @@ fn deviation(v: &[f64], w: usize) -> Vec<f64> {
             v[i] - (pre[b] - pre[a]) / (b - a) as f64
         })
         .collect()
+}
+
+/// Held-out energy per row (per sample) of the residual of a fit.
+fn row_energy(
+    f: &Fit,
+    y: &[[f64; NR]],
+    cols: &[Column],
+    ok: &[bool],
+    span: std::ops::Range<usize>,
+) -> [f64; NR] {
+    let mut acc = [0.0; NR];
+    let mut n = 0usize;
+    for k in span.filter(|&k| ok[k]) {
+        n += 1;
+        for i in 0..NR {
+            let mut r = y[k][i];
+            for (a, &c) in f.cols.iter().enumerate() {
+                r -= f.beta[a] * cols[c].v[k][i];
+            }
+            acc[i] += r * r;
+        }
+    }
+    acc.map(|v| v / n.max(1) as f64)
 }
 
 /// Integrated correlation length (in rows) of the baseline residual on the fit span:

@@ -119,3 +119,20 @@ fn out_of_library_is_unknown() {
     assert_eq!(v, "unknown", "{}", j["ranking"]);
     assert!(j["unexplained_above_noise"].as_f64().unwrap() > 0.05);
 }
+
+/// A quadratic stiffness (outside the library) on the statically deflected mass looks, to
+/// first order, like electrostatic softening on the sense rows; its drive DC and 1st
+/// quadrature rows, which the softening cannot explain, make the answer `unknown`.
+#[test]
+fn quadratic_stiffness_is_unknown_by_its_drive_rows() {
+    let (v, j) = diagnosed(&["quadratic_stiffness=-3e-6"], 103);
+    assert_eq!(v, "unknown", "{}", j["ranking"]);
+    assert_eq!(j["closest_library_effect"], "electrostatic_softening");
+    let rows: Vec<&str> = j["unexplained_rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|r| r.as_str())
+        .collect();
+    assert!(rows.contains(&"drive/DC"), "{rows:?}");
+}
