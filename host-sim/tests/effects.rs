@@ -137,7 +137,7 @@ fn angular_vibration_beats_at_its_beat() {
     // elsewhere
     let on_comb = [3.0f64, -3.0].iter().any(|b| {
         let r = (best.0 - b).rem_euclid(5.0);
-        r < 0.25 || r > 4.75
+        !(0.25..=4.75).contains(&r)
     });
     assert!(on_comb, "{best:?}");
 }
