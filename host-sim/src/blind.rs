@@ -295,12 +295,7 @@ fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyho
         .iter()
         .rposition(|r| r.t_s <= t1 + 1e-9)
         .map_or(rec.rows.len(), |k| k + 1);
-    let f_ref = rec
-        .rows
-        .iter()
-        .map(|r| r.pump_hz)
-        .find(|p| p.is_finite() && *p > 0.0)
-        .unwrap_or(0.0);
+    let f_ref = diagnose::first_pump_hz(rec);
     let rr: Vec<f64> = rec
         .rows
         .iter()

@@ -947,12 +947,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let base = run_pass(rec, &cfg, &|_, _| {})?;
     let mut y = base.y.clone();
     let mut usable = base.usable.clone();
-    let f_ref = rec
-        .rows
-        .iter()
-        .map(|r| r.pump_hz)
-        .find(|p| p.is_finite() && *p > 0.0)
-        .unwrap_or(0.0);
+    let f_ref = first_pump_hz(rec);
     // θ columns
     let th_names = [
         "th11", "th12", "th13", "th14", "th15", "th16", "th17", "th18", "th21", "th22", "th23",
@@ -1154,20 +1149,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
             s.lockin.y0_um += eps * sc;
             s.lockin.y_um[1].re += eps * sc;
         })?;
-        cols.push(Column {
-            name: "feedthrough".into(),
-            v: p.y
-                .iter()
-                .zip(&base.y)
-                .map(|(a, b)| {
-                    let mut v = [0.0; NR];
-                    for r in 0..NR {
-                        v[r] = (a[r] - b[r]) / eps;
-                    }
-                    v
-                })
-                .collect(),
-        });
+        cols.push(fd_column("feedthrough", &p, &base, 1.0 / eps));
     }
     // lock-in mismatch: the rows' response to the replica's cut-off (residual of a
     // device whose lock-in is (1 + δ) × the header's ≈ −δ · ∂y/∂(replica cut-off))
@@ -1176,20 +1158,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         let mut c2 = cfg;
         c2.lockin_lpf_hz *= 1.0 + eps;
         let p = run_pass(rec, &c2, &|_, _| {})?;
-        cols.push(Column {
-            name: "lockin_mismatch".into(),
-            v: p.y
-                .iter()
-                .zip(&base.y)
-                .map(|(a, b)| {
-                    let mut v = [0.0; NR];
-                    for r in 0..NR {
-                        v[r] = -(a[r] - b[r]) / eps;
-                    }
-                    v
-                })
-                .collect(),
-        });
+        cols.push(fd_column("lockin_mismatch", &p, &base, -1.0 / eps));
     }
 
     // --- spans
@@ -1953,6 +1922,33 @@ fn deviation(v: &[f64], w: usize) -> Vec<f64> {
             v[i] - (pre[b] - pre[a]) / (b - a) as f64
         })
         .collect()
+}
+
+/// A finite-difference column: `scale · (rows of pass p − rows of the base pass)`.
+fn fd_column(name: &str, p: &Pass, base: &Pass, scale: f64) -> Column {
+    Column {
+        name: name.into(),
+        v: p.y
+            .iter()
+            .zip(&base.y)
+            .map(|(a, b)| {
+                let mut v = [0.0; NR];
+                for r in 0..NR {
+                    v[r] = scale * (a[r] - b[r]);
+                }
+                v
+            })
+            .collect(),
+    }
+}
+
+/// The first valid pump frequency of a record (the reference of the vibration's beat), Hz.
+pub fn first_pump_hz(rec: &Record) -> f64 {
+    rec.rows
+        .iter()
+        .map(|r| r.pump_hz)
+        .find(|p| p.is_finite() && *p > 0.0)
+        .unwrap_or(0.0)
 }
 
 /// Held-out energy per row (per sample) of the residual of a fit.

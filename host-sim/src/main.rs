@@ -458,14 +458,8 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             model,
             no_resim,
         } => {
-            let rec = record::read_record(&file).map_err(|e| Failure {
-                code: EXIT_LOAD,
-                error: anyhow::Error::new(e),
-            })?;
+            let rec = read_record_warn(&file)?;
             let mut err = std::io::stderr();
-            for w in &rec.warnings {
-                let _ = writeln!(err, "warning: {w}");
-            }
             let mut opts = paragyro_sim::diagnose::Options {
                 resimulate: !no_resim,
                 ..Default::default()
@@ -535,14 +529,7 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             out: dir,
             precision,
         } => {
-            let rec = record::read_record(&file).map_err(|e| Failure {
-                code: EXIT_LOAD,
-                error: anyhow::Error::new(e),
-            })?;
-            let mut err = std::io::stderr();
-            for w in &rec.warnings {
-                let _ = writeln!(err, "warning: {w}");
-            }
+            let rec = read_record_warn(&file)?;
             let source = file.display().to_string();
             let res = record::write_replay(&rec, &source, &dir, precision.into())
                 .map_err(fail(EXIT_RUN))?;
@@ -583,6 +570,19 @@ fn dispatch(cli: Cli, out: &mut dyn Write, progress_ok: bool) -> Result<(), Fail
             say(out, &text)
         }
     }
+}
+
+/// Reads a record; its warnings go to stderr, its error exits with EXIT_LOAD.
+fn read_record_warn(file: &Path) -> Result<record::Record, Failure> {
+    let rec = record::read_record(file).map_err(|e| Failure {
+        code: EXIT_LOAD,
+        error: anyhow::Error::new(e),
+    })?;
+    let mut err = std::io::stderr();
+    for w in &rec.warnings {
+        let _ = writeln!(err, "warning: {w}");
+    }
+    Ok(rec)
 }
 
 fn load(name_or_path: &str) -> Result<Scenario, Failure> {
