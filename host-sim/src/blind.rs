@@ -295,23 +295,21 @@ fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyho
         .iter()
         .rposition(|r| r.t_s <= t1 + 1e-9)
         .map_or(rec.rows.len(), |k| k + 1);
-    let f_ref = diagnose::first_pump_hz(rec);
     let rr: Vec<f64> = rec
         .rows
         .iter()
         .map(|r| r.rate_ref_dps.unwrap_or(0.0))
         .collect();
-    let sim = diagnose::resimulate(
+    let sim = diagnose::Resim {
         rec,
-        &Model::table2(),
-        None,
-        Some(&rr),
+        model: &Model::table2(),
+        gamma: None,
+        rate_ref: Some(&rr),
         effects,
-        0.0,
-        128,
-        f_ref,
-        k0..k1,
-    )?;
+        vib_phase0: 0.0,
+        steps_per_period: 128,
+    }
+    .run(k0..k1)?;
     let mut full = vec![crate::lockin::LockinOut::default(); rec.rows.len()];
     full[k0..k1].clone_from_slice(&sim);
     let ratio = report["output_error"]["noise_diff_ratio"]

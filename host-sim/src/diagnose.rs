@@ -161,10 +161,7 @@ impl Default for Options {
         Options {
             model: Model::table2(),
             resimulate: true,
-            steps_per_period: std::env::var("PARAGYRO_RESIM_SPP")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(128),
+            steps_per_period: 128,
         }
     }
 }
@@ -947,7 +944,6 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let base = run_pass(rec, &cfg, &|_, _| {})?;
     let mut y = base.y.clone();
     let mut usable = base.usable.clone();
-    let f_ref = first_pump_hz(rec);
     // θ columns
     let th_names = [
         "th11", "th12", "th13", "th14", "th15", "th16", "th17", "th18", "th21", "th22", "th23",
@@ -995,17 +991,16 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     if opts.resimulate {
         // the gap is the record's rows minus the simulator's rows on the same inputs: the
         // rows' own approximations (lock-in products, truncated harmonics) cancel
-        let sim = resimulate(
+        let resim = Resim {
             rec,
-            &opts.model,
-            gamma_sim,
-            rate_ref.as_deref(),
-            &[],
-            0.0,
-            opts.steps_per_period,
-            f_ref,
-            0..n,
-        )?;
+            model: &opts.model,
+            gamma: gamma_sim,
+            rate_ref: rate_ref.as_deref(),
+            effects: &[],
+            vib_phase0: 0.0,
+            steps_per_period: opts.steps_per_period,
+        };
+        let sim = resim.run(0..n)?;
         let ps = run_pass(&with_lockin(rec, &sim), &cfg, &|_, _| {})?;
         for k in 0..n {
             for r in 0..NR {
@@ -1187,12 +1182,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
 
     // --- angular vibration: scan the beat (coarse grid, then refine)
     let psi = psi_of(rec);
-    let f_ref = rec
-        .rows
-        .iter()
-        .map(|r| r.pump_hz)
-        .find(|p| p.is_finite() && *p > 0.0)
-        .unwrap_or(0.0);
+    let f_ref = first_pump_hz(rec);
     let base_cols: Vec<usize> = (0..n_base).collect();
     // Ω_v/ω0 ≈ the pump's: its spread over the scan (±6 Hz of 21.9 kHz) is 3e-4 of γ'
     let vbasis = vib_basis(&base, TAU * f_ref / omega0);
@@ -1294,33 +1284,12 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     tick("catch_all_and_grams", &mut timing);
     let base_fit = bank.fit(&base_cols);
     let e0 = base_fit.e_hold;
-    if std::env::var_os("PARAGYRO_DIAG_DEBUG").is_some() {
-        let mut per = [0.0; NR];
-        let mut cnt = 0usize;
-        for k in hold.clone() {
-            if !usable[k] {
-                continue;
-            }
-            cnt += 1;
-            for i in 0..NR {
-                let mut r = y[k][i];
-                for (a, &c) in base_fit.cols.iter().enumerate() {
-                    r -= base_fit.beta[a] * cols[c].v[k][i];
-                }
-                per[i] += r * r;
-            }
-        }
-        eprintln!(
-            "per-row held-out baseline energy: {:?}",
-            per.map(|v| v / cnt.max(1) as f64)
-        );
-    }
     let lib_cols = |name: &str| -> Vec<usize> {
         if name == "angular_vibration" {
-            vec![
-                bank.idx("angular_vibration:re").unwrap_or(usize::MAX),
-                bank.idx("angular_vibration:im").unwrap_or(usize::MAX),
-            ]
+            ["angular_vibration:re", "angular_vibration:im"]
+                .iter()
+                .filter_map(|c| bank.idx(c))
+                .collect()
         } else {
             bank.idx(name).into_iter().collect()
         }
@@ -1328,7 +1297,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let tested: Vec<&str> = LIBRARY
         .iter()
         .copied()
-        .filter(|n| !lib_cols(n).is_empty() && !lib_cols(n).contains(&usize::MAX))
+        .filter(|n| !lib_cols(n).is_empty())
         .collect();
     let all_lib: Vec<usize> = tested.iter().flat_map(|n| lib_cols(n)).collect();
     let with = |extra: &[usize]| -> Vec<usize> {
@@ -1347,19 +1316,27 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let floor_fit = bank.fit(&with(&everything));
     // the floor: the best held-out energy any model reaches (the everything-model can
     // generalise worse than a single candidate to the held-out operating point)
-    let mut e_floor = floor_fit.e_hold.min(e0).min(ca_fit.e_hold);
-    for name in tested.iter().copied() {
-        e_floor = e_floor.min(bank.fit(&with(&lib_cols(name))).e_hold);
-    }
+    // each candidate with the rate, fitted once
+    let cand_fits: Vec<(&str, Vec<usize>, Fit)> = tested
+        .iter()
+        .map(|&name| {
+            let ci = lib_cols(name);
+            let f = bank.fit(&with(&ci));
+            (name, ci, f)
+        })
+        .collect();
+    let e_floor = cand_fits
+        .iter()
+        .map(|c| c.2.e_hold)
+        .fold(floor_fit.e_hold.min(e0).min(ca_fit.e_hold), f64::min);
     let explainable = (e0 - e_floor).max(0.0);
     let n_fit_rows = bank.fit.rows as f64;
     // effective sample count for the BIC: rows over the baseline residual's correlation
     let n_eff = (n_fit_rows / corr_length(&y, &usable, &cols, &base_fit, first..fit_end)).max(1.0);
 
     let mut ranking: Vec<Candidate> = Vec::new();
-    for name in tested.iter().copied() {
-        let ci = lib_cols(name);
-        let f = bank.fit(&with(&ci));
+    for (name, ci, f) in &cand_fits {
+        let (name, ci) = (*name, ci);
         let k0 = base_cols.len();
         let (size, sigma) = if name == "angular_vibration" {
             let (gr, gi) = (f.beta[k0], f.beta[k0 + 1]);
@@ -1459,7 +1436,10 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         .filter(|_| verdict != "none" && verdict != "unknown")
     {
         let c1 = lib_cols(&b.effect);
-        let e1 = bank.fit(&with(&c1)).e_hold;
+        let e1 = cand_fits
+            .iter()
+            .find(|c| c.0 == b.effect)
+            .map_or(e0, |c| c.2.e_hold);
         for c in ranking.iter().skip(1).filter(|c| c.untestable.is_none()) {
             let c2 = lib_cols(&c.effect);
             let f = bank.fit(&with(
@@ -1541,12 +1521,10 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         r
     };
     // held-out energy per row (per sample): baseline, the closest library effect, everything
-    let closest_fit = if closest == "none" || closest == "unknown" || lib_cols(&closest).is_empty()
-    {
-        base_fit.clone()
-    } else {
-        bank.fit(&with(&lib_cols(&closest)))
-    };
+    let closest_fit = cand_fits
+        .iter()
+        .find(|c| c.0 == closest)
+        .map_or_else(|| base_fit.clone(), |c| c.2.clone());
     let by_row = {
         let mut acc = [[0.0f64; 3]; NR];
         let mut cnt = 0usize;
@@ -1706,7 +1684,8 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         if let Some((s, _)) = &secondary {
             names.push(s.clone());
         }
-        let f = bank.fit(&with(&verdict_cols));
+        // after_fit is the fit of exactly these columns
+        let f = &after_fit;
         let mut k = base_cols.len();
         for nm in names {
             if nm == "angular_vibration" {
@@ -1734,17 +1713,16 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let mut oe = json!(null);
     if let Some(before) = &before_sim {
         // the effect's run covers the held-out span (starting 0.5 s early from the record)
-        let after_h = resimulate(
+        let resim = Resim {
             rec,
-            &opts.model,
-            gamma_fit,
-            rate_ref.as_deref(),
-            &verdict_spec,
-            vib_phase,
-            opts.steps_per_period,
-            f_ref,
-            hold_start..last + 1,
-        )?;
+            model: &opts.model,
+            gamma: gamma_fit,
+            rate_ref: rate_ref.as_deref(),
+            effects: &verdict_spec,
+            vib_phase0: vib_phase,
+            steps_per_period: opts.steps_per_period,
+        };
+        let after_h = resim.run(hold_start..last + 1)?;
         let mut after = before.clone();
         after[hold_start..last + 1].clone_from_slice(&after_h);
         let ratio = lockin_noise_diff_ratio(rec)?;
@@ -2025,69 +2003,65 @@ fn corr_length(
 /// 2.6 ms lock-in time constants).
 const RESIM_OVERLAP_S: f64 = 0.5;
 
-/// The simulator re-run open-loop on the record's inputs: pump frequency and amplitude,
+/// The simulator re-run open-loop on a record's inputs: pump frequency and amplitude,
 /// accelerations, die temperature; θ of the model with the given rate (or the rate
-/// table's), plus `effects`. Returns the lock-in outputs for the samples `span`, on the
-/// record's branch (ψ or ψ + π) of the parametric oscillation. The span is split in two
-/// halves on two threads; a half that does not start at sample 0 starts 0.5 s early from
-/// the record's own state there.
-#[allow(clippy::too_many_arguments)]
-pub fn resimulate(
-    rec: &Record,
-    model: &Model,
-    gamma: Option<f64>,
-    rate_ref: Option<&[f64]>,
-    effects: &[EffectSpec],
-    vib_phase0: f64,
-    steps_per_period: usize,
-    f_ref: f64,
-    span: std::ops::Range<usize>,
-) -> anyhow::Result<Vec<LockinOut>> {
-    let psi = psi_of(rec);
-    let (k0, k1) = (span.start, span.end.min(rec.rows.len()));
-    let mid = k0 + (k1 - k0) / 2;
-    let go = |a: usize, b: usize| {
-        resim_chunk(
-            rec,
-            model,
-            gamma,
-            rate_ref,
-            effects,
-            vib_phase0,
-            steps_per_period,
-            f_ref,
-            &psi,
-            a,
-            b,
-        )
-    };
-    let (a, b) = std::thread::scope(|s| {
-        let h = s.spawn(|| go(mid, k1));
-        let a = go(k0, mid);
-        (a, h.join())
-    });
-    let b = b.map_err(|_| anyhow::anyhow!("the re-simulation thread panicked"))?;
-    let mut out = a?;
-    out.extend(b?);
-    if k0 == 0 {
-        // the first half starts from rest: put it on the record's branch
-        let (mut same, mut flip) = (0.0, 0.0);
-        for k in mid / 2..mid {
-            let x = rec.rows[k].x_um[0];
-            let o = out[k].x[0];
-            same += (x.0 - o.0).powi(2) + (x.1 - o.1).powi(2);
-            flip += (x.0 + o.0).powi(2) + (x.1 + o.1).powi(2);
-        }
-        if flip < same {
-            for o in out.iter_mut().take(mid) {
-                o.x[0] = (-o.x[0].0, -o.x[0].1);
-                o.x[2] = (-o.x[2].0, -o.x[2].1);
-                o.y[0] = (-o.y[0].0, -o.y[0].1);
-                o.y[2] = (-o.y[2].0, -o.y[2].1);
+/// table's), plus `effects`.
+#[derive(Clone, Copy, Debug)]
+pub struct Resim<'a> {
+    /// The record whose inputs drive the simulator.
+    pub rec: &'a Record,
+    /// The simulator's configuration.
+    pub model: &'a Model,
+    /// The rate γ when the record has no rate table (`None`: the model's).
+    pub gamma: Option<f64>,
+    /// The rate table, °/s per sample (takes precedence over `gamma`).
+    pub rate_ref: Option<&'a [f64]>,
+    /// Effects added to the simulator.
+    pub effects: &'a [EffectSpec],
+    /// Angular vibration phase φ0, rad.
+    pub vib_phase0: f64,
+    /// RK4 steps per carrier period.
+    pub steps_per_period: usize,
+}
+
+impl Resim<'_> {
+    /// The lock-in outputs for the samples `span`, on the record's branch (ψ or ψ + π) of
+    /// the parametric oscillation. The span is split in two halves on two threads; a half
+    /// that does not start at sample 0 starts 0.5 s early from the record's own state.
+    pub fn run(&self, span: std::ops::Range<usize>) -> anyhow::Result<Vec<LockinOut>> {
+        let rec = self.rec;
+        let psi = psi_of(rec);
+        let (k0, k1) = (span.start, span.end.min(rec.rows.len()));
+        let mid = k0 + (k1 - k0) / 2;
+        let go = |a: usize, b: usize| self.chunk(&psi, a, b);
+        let (a, b) = std::thread::scope(|s| {
+            let h = s.spawn(|| go(mid, k1));
+            let a = go(k0, mid);
+            (a, h.join())
+        });
+        let b = b.map_err(|_| anyhow::anyhow!("the re-simulation thread panicked"))?;
+        let mut out = a?;
+        out.extend(b?);
+        if k0 == 0 {
+            // the first half starts from rest: put it on the record's branch
+            let (mut same, mut flip) = (0.0, 0.0);
+            for k in mid / 2..mid {
+                let x = rec.rows[k].x_um[0];
+                let o = out[k].x[0];
+                same += (x.0 - o.0).powi(2) + (x.1 - o.1).powi(2);
+                flip += (x.0 + o.0).powi(2) + (x.1 + o.1).powi(2);
+            }
+            if flip < same {
+                for o in out.iter_mut().take(mid) {
+                    o.x[0] = (-o.x[0].0, -o.x[0].1);
+                    o.x[2] = (-o.x[2].0, -o.x[2].1);
+                    o.y[0] = (-o.y[0].0, -o.y[0].1);
+                    o.y[2] = (-o.y[2].0, -o.y[2].1);
+                }
             }
         }
+        Ok(out)
     }
-    Ok(out)
 }
 
 /// Output error of re-simulated lock-in outputs against a record.
@@ -2221,90 +2195,90 @@ fn state_of(r: &crate::record::RecordRow, psi: f64, om: f64, l0: f64) -> [f64; 4
     [x, xd, y, yd]
 }
 
-#[allow(clippy::too_many_arguments)]
-fn resim_chunk(
-    rec: &Record,
-    model: &Model,
-    gamma: Option<f64>,
-    rate_ref: Option<&[f64]>,
-    effects: &[EffectSpec],
-    vib_phase0: f64,
-    steps_per_period: usize,
-    f_ref: f64,
-    psi: &[f64],
-    k0: usize,
-    k1: usize,
-) -> anyhow::Result<Vec<LockinOut>> {
-    let h = &rec.header;
-    let omega0 = TAU * h.f0_hz;
-    let gpd = gamma_per_dps(omega0);
-    let mut fx = Effects::from_specs(effects, gpd).map_err(anyhow::Error::msg)?;
-    fx.vib_phase0 = vib_phase0;
-    let pump_max = rec
-        .rows
-        .iter()
-        .map(|r| r.pump_hz)
-        .filter(|p| p.is_finite())
-        .fold(0.0, f64::max);
-    let simcfg = SimConfig {
-        omega0_rad_s: omega0,
-        fs_hz: h.fs_hz,
-        steps_per_period,
-        omega_max: (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5),
-        lpf_order: h.lockin_lpf_order,
-        lpf_hz: h.lockin_lpf_hz * (1.0 + fx.lockin_mismatch),
-        noise_density: 0.0,
-        seed: 1,
-    };
-    let accel_si = h.l0_um * 1e-6 * omega0 * omega0;
-    let input = |k: usize| -> PlantInputs {
-        let r = &rec.rows[k];
-        let ok = |v: f64, d: f64| if v.is_finite() { v } else { d };
-        PlantInputs {
-            omega: ok(r.pump_hz, f_ref) / (2.0 * h.f0_hz),
-            s: ok((r.pump_amp_v / h.pump_amp_ref_v).powi(2), 1.0),
-            ax: ok(r.ax_mps2, 0.0) / accel_si,
-            ay: ok(r.ay_mps2, 0.0) / accel_si,
-        }
-    };
-    let start = if k0 == 0 {
-        0
-    } else {
-        k0.saturating_sub((RESIM_OVERLAP_S * h.fs_hz) as usize)
-    };
-    let first = &rec.rows[start];
-    let z0 = if start == 0 && first.x_abs(1) < 0.05 * h.l0_um {
-        [0.01, 0.0, 0.0, 0.0] // from rest: the simulator's start-up convention
-    } else {
-        state_of(first, psi[start], input(start).omega, h.l0_um)
-    };
-    let mut sim = GyroSim::new(&simcfg, z0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
-    sim.set_effects(fx, TAU * (f_ref + fx.vib_beat_hz) / omega0);
-    if start > 0 {
-        sim.restart_at(start as u64, z0, psi[start]);
-    }
-    let mut phys = model.phys;
-    let mut out = Vec::with_capacity(k1 - k0);
-    for k in start..k1 {
-        if k >= k0 {
-            out.push(sim.lockin());
-        }
-        if k + 1 == rec.rows.len() {
-            break;
-        }
-        phys.gamma = match (rate_ref, gamma) {
-            (Some(rr), _) => gpd * rr[k],
-            (None, Some(g)) => g,
-            (None, None) => model.phys.gamma,
+impl Resim<'_> {
+    /// One chunk `[k0, k1)` of [`Resim::run`].
+    fn chunk(&self, psi: &[f64], k0: usize, k1: usize) -> anyhow::Result<Vec<LockinOut>> {
+        let Resim {
+            rec,
+            model,
+            gamma,
+            rate_ref,
+            effects,
+            vib_phase0,
+            steps_per_period,
+        } = *self;
+        let f_ref = first_pump_hz(rec);
+        let h = &rec.header;
+        let omega0 = TAU * h.f0_hz;
+        let gpd = gamma_per_dps(omega0);
+        let mut fx = Effects::from_specs(effects, gpd).map_err(anyhow::Error::msg)?;
+        fx.vib_phase0 = vib_phase0;
+        let pump_max = rec
+            .rows
+            .iter()
+            .map(|r| r.pump_hz)
+            .filter(|p| p.is_finite())
+            .fold(0.0, f64::max);
+        let simcfg = SimConfig {
+            omega0_rad_s: omega0,
+            fs_hz: h.fs_hz,
+            steps_per_period,
+            omega_max: (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5),
+            lpf_order: h.lockin_lpf_order,
+            lpf_hz: h.lockin_lpf_hz * (1.0 + fx.lockin_mismatch),
+            noise_density: 0.0,
+            seed: 1,
         };
-        let (mut d, mut s) = theta_from_physical(&phys);
-        if fx.tcf_ppm_k != 0.0 {
-            let tc = rec.rows[k].temp_c.unwrap_or(T_REF_C);
-            fx.thermal_theta(&mut d, &mut s, phys.wx2, phys.wy2, tc);
+        let accel_si = h.l0_um * 1e-6 * omega0 * omega0;
+        let input = |k: usize| -> PlantInputs {
+            let r = &rec.rows[k];
+            let ok = |v: f64, d: f64| if v.is_finite() { v } else { d };
+            PlantInputs {
+                omega: ok(r.pump_hz, f_ref) / (2.0 * h.f0_hz),
+                s: ok((r.pump_amp_v / h.pump_amp_ref_v).powi(2), 1.0),
+                ax: ok(r.ax_mps2, 0.0) / accel_si,
+                ay: ok(r.ay_mps2, 0.0) / accel_si,
+            }
+        };
+        let start = if k0 == 0 {
+            0
+        } else {
+            k0.saturating_sub((RESIM_OVERLAP_S * h.fs_hz) as usize)
+        };
+        let first = &rec.rows[start];
+        let z0 = if start == 0 && first.x_abs(1) < 0.05 * h.l0_um {
+            [0.01, 0.0, 0.0, 0.0] // from rest: the simulator's start-up convention
+        } else {
+            state_of(first, psi[start], input(start).omega, h.l0_um)
+        };
+        let mut sim = GyroSim::new(&simcfg, z0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+        sim.set_effects(fx, TAU * (f_ref + fx.vib_beat_hz) / omega0);
+        if start > 0 {
+            sim.restart_at(start as u64, z0, psi[start]);
         }
-        sim.advance(&Theta { drive: d, sense: s }, &input(k), &input(k + 1));
+        let mut phys = model.phys;
+        let mut out = Vec::with_capacity(k1 - k0);
+        for k in start..k1 {
+            if k >= k0 {
+                out.push(sim.lockin());
+            }
+            if k + 1 == rec.rows.len() {
+                break;
+            }
+            phys.gamma = match (rate_ref, gamma) {
+                (Some(rr), _) => gpd * rr[k],
+                (None, Some(g)) => g,
+                (None, None) => model.phys.gamma,
+            };
+            let (mut d, mut s) = theta_from_physical(&phys);
+            if fx.tcf_ppm_k != 0.0 {
+                let tc = rec.rows[k].temp_c.unwrap_or(T_REF_C);
+                fx.thermal_theta(&mut d, &mut s, phys.wx2, phys.wy2, tc);
+            }
+            sim.advance(&Theta { drive: d, sense: s }, &input(k), &input(k + 1));
+        }
+        Ok(out)
     }
-    Ok(out)
 }
 
 /// The record with its lock-in channels replaced by `li` (same inputs).
