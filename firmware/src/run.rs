@@ -180,25 +180,7 @@ pub fn apply_controls(table: &ReplayTable<'_>, k: usize, app: &mut ReplayApp<'_>
     n
 }
 
-/// FNV-1a 64, streaming.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Fnv64(pub u64);
-
-impl Default for Fnv64 {
-    fn default() -> Self {
-        Self(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv64 {
-    /// Hash `data` in.
-    pub fn write(&mut self, data: &[u8]) {
-        for b in data {
-            self.0 ^= u64::from(*b);
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-}
+pub use crate::table::Fnv64;
 
 /// Hashes one tick's outputs: the core's command and health, the firmware's realised
 /// pump and fault bits, and θ̂ (`Estimator::theta`, the bits of its `f64` values).

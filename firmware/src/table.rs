@@ -1,6 +1,7 @@
 //! The firmware's replay table: a simulated record in a compact binary form that the QEMU
 //! board serves through its replay devices ([`crate::replay`]), written on the host by
-//! `paragyro-fw-replay` (host-sim/src/bin/paragyro-fw-replay/, docs/firmware.md).
+//! `paragyro-fw-replay` (host-sim/fw-replay/, docs/firmware.md), which takes every
+//! layout constant, slot index and the hash from this module.
 //!
 //! # Format (`PGFWRPL1`, little-endian)
 //!
@@ -213,14 +214,117 @@ fn i24_at(b: &[u8], at: usize) -> i32 {
     i32::from_le_bytes([0, b0, b1, b2]) >> 8
 }
 
+/// FNV-1a 64, streaming (the table's sample hash and the replay run's output digest).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fnv64(pub u64);
+
+impl Default for Fnv64 {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv64 {
+    /// Hash `data` in.
+    pub fn write(&mut self, data: &[u8]) {
+        for b in data {
+            self.0 ^= u64::from(*b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
 /// FNV-1a 64 of `data`.
 pub fn fnv1a64(data: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in data {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
+    let mut h = Fnv64::default();
+    h.write(data);
+    h.0
+}
+
+/// The configuration block of `c`: the [`cfg`] slots (the fields a scenario sets), written
+/// by the host's table generator (`paragyro-fw-replay`); [`config_from_slots`] is its
+/// inverse on top of [`Config::table2`].
+pub fn config_slots(c: &Config) -> [f64; CFG_SLOTS] {
+    let b = |v: bool| if v { 1.0 } else { 0.0 };
+    let mut s = [0.0; CFG_SLOTS];
+    s[cfg::F0_HZ] = c.f0_hz;
+    s[cfg::FS_HZ] = c.fs_hz;
+    s[cfg::L0_UM] = c.l0_um;
+    s[cfg::LOCKIN_LPF_ORDER] = c.lockin_lpf_order as f64;
+    s[cfg::LOCKIN_LPF_HZ] = c.lockin_lpf_hz;
+    s[cfg::PUMP_AMP_REF_V] = c.pump_amp_ref_v;
+    s[cfg::PUMP_PROFILE] = b(c.pump_profile == PumpProfile::Staircase);
+    let n = &c.nominal;
+    let nominal = [
+        n.mu_x, n.mu_y, n.mu_xy, n.wx2, n.wy2, n.wxy2, n.alpha_x, n.alpha_y, n.beta1, n.beta3,
+        n.gamma, n.gamma_p, n.c_ax, n.c_ay,
+    ];
+    s[cfg::NOMINAL..cfg::NOMINAL + nominal.len()].copy_from_slice(&nominal);
+    s[cfg::PUMP_CENTRE_HZ] = c.pump_centre_hz;
+    s[cfg::DITHER_ENABLED] = b(c.dither.enabled);
+    s[cfg::DITHER_PUMP_HZ] = c.dither.pump_hz;
+    s[cfg::DITHER_FREQ_HZ] = c.dither.freq_hz;
+    s[cfg::DITHER_START_S] = c.dither.start_s;
+    s[cfg::DITHER_TAPER_S] = c.dither.taper_s;
+    s[cfg::DITHER_SCALE_FRAC] = c.dither.scale_frac;
+    s[cfg::DITHER_SCALE_FREQ_HZ] = c.dither.scale_freq_hz;
+    s[cfg::NOISE_PM_RTHZ] = c.noise_pm_rthz;
+    s[cfg::RLS_FORGETTING] = c.rls.forgetting;
+    s[cfg::GATE_STARTUP_S] = c.monitor.gate_startup_s;
+    s[cfg::STUCK_SAMPLES] = f64::from(c.monitor.stuck_samples);
+    s[cfg::RETUNE_ENABLED] = b(c.retune.enabled);
+    s[cfg::RETUNE_RAMP_S] = c.retune.ramp_s;
+    s
+}
+
+/// The configuration whose [`cfg`] slots are `slot(i)`, every other field
+/// [`Config::table2`]'s: the inverse of [`config_slots`] (the reader of the block).
+pub fn config_from_slots(slot: impl Fn(usize) -> f64) -> Config {
+    let s = &slot;
+    let flag = |i| slot(i) != 0.0;
+    let mut c = Config::table2();
+    c.f0_hz = s(cfg::F0_HZ);
+    c.fs_hz = s(cfg::FS_HZ);
+    c.l0_um = s(cfg::L0_UM);
+    c.lockin_lpf_order = s(cfg::LOCKIN_LPF_ORDER) as usize;
+    c.lockin_lpf_hz = s(cfg::LOCKIN_LPF_HZ);
+    c.pump_amp_ref_v = s(cfg::PUMP_AMP_REF_V);
+    c.pump_profile = if flag(cfg::PUMP_PROFILE) {
+        PumpProfile::Staircase
+    } else {
+        PumpProfile::Linear
+    };
+    let n = |k: usize| s(cfg::NOMINAL.saturating_add(k));
+    let p = &mut c.nominal;
+    p.mu_x = n(0);
+    p.mu_y = n(1);
+    p.mu_xy = n(2);
+    p.wx2 = n(3);
+    p.wy2 = n(4);
+    p.wxy2 = n(5);
+    p.alpha_x = n(6);
+    p.alpha_y = n(7);
+    p.beta1 = n(8);
+    p.beta3 = n(9);
+    p.gamma = n(10);
+    p.gamma_p = n(11);
+    p.c_ax = n(12);
+    p.c_ay = n(13);
+    c.pump_centre_hz = s(cfg::PUMP_CENTRE_HZ);
+    c.dither.enabled = flag(cfg::DITHER_ENABLED);
+    c.dither.pump_hz = s(cfg::DITHER_PUMP_HZ);
+    c.dither.freq_hz = s(cfg::DITHER_FREQ_HZ);
+    c.dither.start_s = s(cfg::DITHER_START_S);
+    c.dither.taper_s = s(cfg::DITHER_TAPER_S);
+    c.dither.scale_frac = s(cfg::DITHER_SCALE_FRAC);
+    c.dither.scale_freq_hz = s(cfg::DITHER_SCALE_FREQ_HZ);
+    c.noise_pm_rthz = s(cfg::NOISE_PM_RTHZ);
+    c.rls.forgetting = s(cfg::RLS_FORGETTING);
+    c.monitor.gate_startup_s = s(cfg::GATE_STARTUP_S);
+    c.monitor.stuck_samples = s(cfg::STUCK_SAMPLES) as u32;
+    c.retune.enabled = flag(cfg::RETUNE_ENABLED);
+    c.retune.ramp_s = s(cfg::RETUNE_RAMP_S);
+    c
 }
 
 impl<'a> ReplayTable<'a> {
@@ -322,51 +426,7 @@ impl<'a> ReplayTable<'a> {
     /// The core configuration: [`Config::table2`] with the table's slots (validate it with
     /// [`Config::build`]).
     pub fn config(&self) -> Config {
-        let s = |i| self.cfg_slot(i);
-        let flag = |i| self.cfg_slot(i) != 0.0;
-        let mut c = Config::table2();
-        c.f0_hz = s(cfg::F0_HZ);
-        c.fs_hz = s(cfg::FS_HZ);
-        c.l0_um = s(cfg::L0_UM);
-        c.lockin_lpf_order = s(cfg::LOCKIN_LPF_ORDER) as usize;
-        c.lockin_lpf_hz = s(cfg::LOCKIN_LPF_HZ);
-        c.pump_amp_ref_v = s(cfg::PUMP_AMP_REF_V);
-        c.pump_profile = if flag(cfg::PUMP_PROFILE) {
-            PumpProfile::Staircase
-        } else {
-            PumpProfile::Linear
-        };
-        let n = |k: usize| s(cfg::NOMINAL.saturating_add(k));
-        let p = &mut c.nominal;
-        p.mu_x = n(0);
-        p.mu_y = n(1);
-        p.mu_xy = n(2);
-        p.wx2 = n(3);
-        p.wy2 = n(4);
-        p.wxy2 = n(5);
-        p.alpha_x = n(6);
-        p.alpha_y = n(7);
-        p.beta1 = n(8);
-        p.beta3 = n(9);
-        p.gamma = n(10);
-        p.gamma_p = n(11);
-        p.c_ax = n(12);
-        p.c_ay = n(13);
-        c.pump_centre_hz = s(cfg::PUMP_CENTRE_HZ);
-        c.dither.enabled = flag(cfg::DITHER_ENABLED);
-        c.dither.pump_hz = s(cfg::DITHER_PUMP_HZ);
-        c.dither.freq_hz = s(cfg::DITHER_FREQ_HZ);
-        c.dither.start_s = s(cfg::DITHER_START_S);
-        c.dither.taper_s = s(cfg::DITHER_TAPER_S);
-        c.dither.scale_frac = s(cfg::DITHER_SCALE_FRAC);
-        c.dither.scale_freq_hz = s(cfg::DITHER_SCALE_FREQ_HZ);
-        c.noise_pm_rthz = s(cfg::NOISE_PM_RTHZ);
-        c.rls.forgetting = s(cfg::RLS_FORGETTING);
-        c.monitor.gate_startup_s = s(cfg::GATE_STARTUP_S);
-        c.monitor.stuck_samples = s(cfg::STUCK_SAMPLES) as u32;
-        c.retune.enabled = flag(cfg::RETUNE_ENABLED);
-        c.retune.ramp_s = s(cfg::RETUNE_RAMP_S);
-        c
+        config_from_slots(|i| self.cfg_slot(i))
     }
 
     /// Sample `k` (`None` past the end).

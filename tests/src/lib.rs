@@ -1,8 +1,8 @@
 //! Shared helpers for the end-to-end tests in `tests/tests/`.
 
-use paragyro_sim::runner::{Precision, RunOptions, run};
-use paragyro_sim::scenario::Scenario;
-use paragyro_sim::trace::{RunResult, TraceRow};
+use paragyro_simulator::runner::{Precision, RunOptions, run};
+use paragyro_simulator::scenario::Scenario;
+use paragyro_simulator::trace::{RunResult, TraceRow};
 
 /// Runs a built-in scenario (optionally shortened) with the core in `precision`.
 pub fn run_builtin(name: &str, precision: Precision, duration_s: Option<f64>) -> RunResult {

@@ -1,7 +1,7 @@
 //! Acceptance of the foundation issue, from seeded runs of the built-in scenarios
 //! (simulated gyro → f32 core, as on the chip). Limits from the issue / FINDINGS.md.
 
-use paragyro_sim::runner::Precision;
+use paragyro_simulator::runner::Precision;
 use paragyro_tests::{all_within_from, rel, run_builtin, theta_err, theta_name};
 
 /// `identify`, full length (10 s): every θ within 1e-3 except θ14 ≤ 2 % and θ17 ≤ 1 %;
@@ -52,19 +52,19 @@ fn identify_full_length_f32_and_f64() {
 fn f32_tracks_f64() {
     let a = run_builtin("identify", Precision::F32, Some(6.0));
     let b = run_builtin("identify", Precision::F64, Some(6.0));
-    let rms = |r: &paragyro_sim::trace::RunResult,
-               f: &dyn Fn(&paragyro_sim::trace::TraceRow) -> f64| {
+    let rms = |r: &paragyro_simulator::trace::RunResult,
+               f: &dyn Fn(&paragyro_simulator::trace::TraceRow) -> f64| {
         let rows: Vec<_> = r.trace.iter().filter(|x| x.t_s >= 4.0).collect();
         (rows.iter().map(|x| f(x).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
     };
-    let rate = |x: &paragyro_sim::trace::TraceRow| rel(x.rate_dps_est, 150.0);
+    let rate = |x: &paragyro_simulator::trace::TraceRow| rel(x.rate_dps_est, 150.0);
     let (ea, eb) = (rms(&a, &rate), rms(&b, &rate));
     assert!(
         ea <= 1.5 * eb,
         "rms rate error f32 {ea:.2e} vs f64 {eb:.2e}"
     );
     for j in [3usize, 6] {
-        let f = move |x: &paragyro_sim::trace::TraceRow| theta_err(x, j);
+        let f = move |x: &paragyro_simulator::trace::TraceRow| theta_err(x, j);
         let (x, y) = (rms(&a, &f), rms(&b, &f));
         assert!(
             x <= 1.5 * y,

@@ -2,7 +2,7 @@
 //!
 //! * `replay_table_regenerates`: the checked-in replay table is what `paragyro-fw-replay
 //!   table` makes from `host-sim/scenarios/fw-drift-retune.toml` today (same generator
-//!   code, included by path), and the firmware's reader gets the scenario's core
+//!   code, from `paragyro-fw-replay`), and the firmware's reader gets the scenario's core
 //!   configuration back from it.
 //! * `qemu_matches_host`: builds the `qemu` board with `tick-stream` and `capture` (its own
 //!   target directory, `target/fw-test`), runs it in QEMU (`scripts/qemu-run.sh`: exit 0
@@ -25,15 +25,10 @@ use paragyro_firmware::drivers::ads131m08::RawCode;
 use paragyro_firmware::replay::DdsCapture;
 use paragyro_firmware::run::{ReplayCheck, apply_controls, calibration, replay_app};
 use paragyro_firmware::table::ReplayTable;
-use paragyro_sim::scenario::Scenario;
+use paragyro_simulator::scenario::Scenario;
 
-#[allow(dead_code)]
-#[path = "../../host-sim/src/bin/paragyro-fw-replay/table.rs"]
-mod fwtable;
-
-#[allow(dead_code)]
-#[path = "../../host-sim/src/bin/paragyro-fw-replay/capture.rs"]
-mod capture;
+use paragyro_fw_replay::capture;
+use paragyro_fw_replay::table as fwtable;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -66,13 +61,13 @@ fn replay_table_regenerates() {
         t.bytes.len(),
         file.len(),
         "firmware/replay/fw-drift-retune.bin is stale: regenerate it with \
-         `cargo run --release -p paragyro-sim --bin paragyro-fw-replay -- table`"
+         `cargo run --release -p paragyro-fw-replay -- table`"
     );
     if let Some(i) = t.bytes.iter().zip(&file).position(|(a, b)| a != b) {
         panic!(
             "firmware/replay/fw-drift-retune.bin differs from the generator's output at byte {i} \
              (header is 1024 bytes, samples 60 bytes each): regenerate it with \
-             `cargo run --release -p paragyro-sim --bin paragyro-fw-replay -- table`"
+             `cargo run --release -p paragyro-fw-replay -- table`"
         );
     }
     let table = ReplayTable::parse(&file).expect("parse");

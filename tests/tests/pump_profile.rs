@@ -7,8 +7,8 @@
 
 use paragyro_core::Estimator;
 use paragyro_core::config::PumpProfile;
-use paragyro_sim::runner::{closed_loop, core_config};
-use paragyro_sim::scenario::{PumpProfileSpec, Scenario};
+use paragyro_simulator::runner::{closed_loop, core_config};
+use paragyro_simulator::scenario::{PumpProfileSpec, Scenario};
 
 /// Final relative errors of θ14 and of the rate (identify, 10 s, f32, seed 1).
 fn run(sim: PumpProfileSpec, core: PumpProfile) -> (f64, f64) {

@@ -5,8 +5,8 @@
 //! the excitation moves the envelopes. The integrator's own (4th-order) error is made
 //! negligible with 512 steps per carrier period.
 
-use paragyro_sim::runner::calibrate_rows;
-use paragyro_sim::scenario::Scenario;
+use paragyro_simulator::runner::calibrate_rows;
+use paragyro_simulator::scenario::Scenario;
 
 /// Noise-free residual of each row with the true θ, in units of the configured row noise
 /// at 1 pm/√Hz.

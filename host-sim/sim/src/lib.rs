@@ -1,0 +1,17 @@
+//! paragyro-simulator: the simulated gyro (full-rate eq. 6 + lock-in + sim-to-real
+//! effects), scenarios, records, the closed-loop runner that drives the core, and the
+//! plotting kit. No command-line crates: the CLI is `paragyro-sim` (host-sim/cli).
+#![forbid(unsafe_code)]
+// Index loops over small fixed arrays read like the math they implement.
+#![allow(clippy::needless_range_loop)]
+
+pub mod effects;
+pub mod lockin;
+pub mod plant;
+pub mod plot;
+pub mod record;
+pub mod report;
+pub mod results;
+pub mod runner;
+pub mod scenario;
+pub mod trace;

@@ -1,0 +1,159 @@
+//! `cargo xtask test [ARGS]`: the README's test command.
+//!
+//! `cargo test --workspace` alone needs three things a fresh machine does not have: the
+//! `thumbv7em-none-eabihf` target (the firmware-in-QEMU test builds the firmware),
+//! `qemu-system-arm` (it runs it) and `defmt-print` (it decodes its output). This installs
+//! each one that is missing, says what it did, and then runs `cargo test --workspace` with
+//! any further arguments passed through. It never updates the toolchain (no
+//! `rustup update`, no `rust-toolchain.toml`): it only adds the target.
+//!
+//! * `cargo xtask test` — install what is missing, then run every test.
+//! * `cargo xtask test --no-install` — run the tests as the machine is (the QEMU test then
+//!   fails with a message naming what is missing, or is skipped with `PARAGYRO_SKIP_QEMU=1`).
+//! * `cargo xtask setup` — only install.
+//!
+//! `qemu-system-arm` comes from Debian's packages (`apt-get`, as root: CI and these
+//! machines run as root); elsewhere the message says what to install by hand.
+#![forbid(unsafe_code)]
+
+use std::env;
+use std::process::{Command, ExitCode, Stdio};
+
+const THUMB: &str = "thumbv7em-none-eabihf";
+const DEFMT_PRINT: &str = "defmt-print@1.2.0";
+
+fn main() -> ExitCode {
+    let mut args: Vec<String> = env::args().skip(1).collect();
+    if args.is_empty() {
+        eprintln!("{}", usage());
+        return ExitCode::from(2);
+    }
+    let task = args.remove(0);
+    let result = match task.as_str() {
+        "setup" => setup(),
+        "test" => {
+            let install = !take_flag(&mut args, "--no-install");
+            (if install { setup() } else { Ok(()) }).and_then(|()| test(&args))
+        }
+        "-h" | "--help" | "help" => {
+            println!("{}", usage());
+            Ok(())
+        }
+        other => Err(format!("unknown task `{other}`\n{}", usage())),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn usage() -> &'static str {
+    "usage: cargo xtask <task>\n\
+     \x20 test [--no-install] [CARGO TEST ARGS]   install what the tests need, then `cargo test --workspace`\n\
+     \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print)"
+}
+
+fn take_flag(args: &mut Vec<String>, flag: &str) -> bool {
+    let before = args.len();
+    args.retain(|a| a != flag);
+    args.len() != before
+}
+
+/// Installs the thumb target, `qemu-system-arm` and `defmt-print` where missing.
+fn setup() -> Result<(), String> {
+    let installed = output("rustup", &["target", "list", "--installed"])
+        .map_err(|e| format!("cannot run rustup ({e}): the thumb target must be added by hand"))?;
+    if installed.lines().any(|l| l.trim() == THUMB) {
+        say(&format!("{THUMB}: installed"));
+    } else {
+        say(&format!("{THUMB}: adding it (rustup target add {THUMB})"));
+        run("rustup", &["target", "add", THUMB])?;
+    }
+
+    if found("qemu-system-arm") {
+        say("qemu-system-arm: installed");
+    } else if is_root() && found("apt-get") {
+        say("qemu-system-arm: installing it (apt-get install qemu-system-arm)");
+        run("apt-get", &["update", "-qq"])?;
+        run_env(
+            "apt-get",
+            &["install", "-y", "-qq", "--no-install-recommends", "qemu-system-arm"],
+            &[("DEBIAN_FRONTEND", "noninteractive")],
+        )?;
+    } else {
+        return Err("qemu-system-arm is missing and cannot be installed from here (not root, \
+                    or no apt-get): install it (Debian/Ubuntu: `apt-get install \
+                    qemu-system-arm`), or run `cargo xtask test --no-install` with \
+                    PARAGYRO_SKIP_QEMU=1 to skip the firmware-in-QEMU test"
+            .into());
+    }
+
+    if found("defmt-print") {
+        say("defmt-print: installed");
+    } else {
+        say(&format!("defmt-print: installing it (cargo install --locked {DEFMT_PRINT})"));
+        run("cargo", &["install", "--locked", "--quiet", DEFMT_PRINT])?;
+    }
+    Ok(())
+}
+
+/// `cargo test --workspace ARGS`.
+fn test(args: &[String]) -> Result<(), String> {
+    let mut all = vec!["test".to_string(), "--workspace".to_string()];
+    all.extend(args.iter().cloned());
+    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+    say(&format!("cargo {}", refs.join(" ")));
+    run(&cargo(), &refs)
+}
+
+fn cargo() -> String {
+    env::var("CARGO").unwrap_or_else(|_| "cargo".into())
+}
+
+fn say(s: &str) {
+    println!("xtask: {s}");
+}
+
+fn found(cmd: &str) -> bool {
+    Command::new(cmd)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok()
+}
+
+fn is_root() -> bool {
+    output("id", &["-u"]).is_ok_and(|s| s.trim() == "0")
+}
+
+fn output(cmd: &str, args: &[&str]) -> Result<String, String> {
+    let out = Command::new(cmd)
+        .args(args)
+        .output()
+        .map_err(|e| format!("{cmd}: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("`{cmd} {}` failed: {}", args.join(" "), out.status));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+fn run(cmd: &str, args: &[&str]) -> Result<(), String> {
+    run_env(cmd, args, &[])
+}
+
+fn run_env(cmd: &str, args: &[&str], envs: &[(&str, &str)]) -> Result<(), String> {
+    let status = Command::new(cmd)
+        .args(args)
+        .envs(envs.iter().copied())
+        .status()
+        .map_err(|e| format!("cannot start `{cmd}`: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`{cmd} {}` failed: {status}", args.join(" ")))
+    }
+}
