@@ -672,7 +672,7 @@ impl BlockLpf {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::OMEGA0_RAD_S;
+    use paragyro_core::physics::OMEGA0_TABLE2_RAD_S as OMEGA0_RAD_S;
     use std::f64::consts::PI;
 
     fn hz_to_rad_tau(f: f64) -> f64 {

@@ -48,12 +48,14 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-/// The paper's time scale ω0 = 2.618 / 3.8581e-5 ≈ 67 857 rad/s (10.80 kHz): the drive
-/// natural frequency, chosen so that γ = 3.8581e-5 corresponds to 150 °/s.
-pub const OMEGA0_RAD_S: f64 = 2.618 / 3.8581e-5;
+pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
 
-/// Table 2 Coriolis coefficient γ (150 °/s).
-pub const GAMMA_TABLE2: f64 = 3.8581e-5;
+/// The core's [`OMEGA0_TABLE2_RAD_S`] under its former simulator name (kept for the
+/// papers crate; new code uses the core's name).
+pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S as OMEGA0_RAD_S;
+
+/// Table 2 Coriolis coefficient γ (150 °/s), the core's `TABLE2.gamma`.
+pub const GAMMA_TABLE2: f64 = paragyro_core::physics::TABLE2.gamma;
 
 /// Table 2 non-dimensional acceleration ã = 10 g/(L0 ω0²).
 pub const ACCEL_TABLE2: f64 = 0.0213;
@@ -83,25 +85,26 @@ pub struct Theta {
 impl Theta {
     /// The nominal parameters of the paper's Table 2 (γ = 3.8581e-5, ωy² = 1.0265).
     pub fn table2() -> Self {
-        let g = GAMMA_TABLE2;
+        let t = &paragyro_core::physics::TABLE2;
+        let g = t.gamma;
         Self {
             drive: [
-                -1e-3,
-                -(1.0 - g * g + 2.0 * 0.0226),
-                -0.002,
-                -(1e-4 - 2.0 * g),
-                -(2.0 * 6.33e-5 + 0.002303),
-                -0.0452,
-                -1.266e-4,
-                1.0,
+                -t.mu_x,
+                -(t.wx2 - g * g + 2.0 * t.beta1),
+                -t.wxy2,
+                -(t.mu_xy - 2.0 * g),
+                -(2.0 * t.beta3 + t.alpha_x),
+                -2.0 * t.beta1,
+                -2.0 * t.beta3,
+                t.c_ax,
             ],
             sense: [
-                -1e-3,
-                -(1.0265 - g * g),
-                -0.002,
-                -(1e-4 + 2.0 * g),
-                -0.001264,
-                1.0,
+                -t.mu_y,
+                -(t.wy2 - g * g),
+                -t.wxy2,
+                -(t.mu_xy + 2.0 * g),
+                -t.alpha_y,
+                t.c_ay,
             ],
         }
     }
@@ -167,7 +170,7 @@ impl Default for SimConfig {
     /// low-pass, 1 pm/√Hz, seed 1.
     fn default() -> Self {
         Self {
-            omega0_rad_s: OMEGA0_RAD_S,
+            omega0_rad_s: OMEGA0_TABLE2_RAD_S,
             fs_hz: 500.0,
             steps_per_period: 128,
             omega_max: 1.05,

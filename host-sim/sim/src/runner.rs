@@ -16,7 +16,7 @@ use serde_json::{Map, Value, json};
 use crate::effects::Effects;
 use crate::lockin::LockinOut;
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
-use crate::scenario::{EventKind, EventSpec, PlantAt, PumpProfileSpec, Scenario};
+use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, PumpProfileSpec, Scenario};
 use crate::trace::{Event, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow};
 
 /// Precision of the core instantiation.
@@ -46,9 +46,6 @@ pub struct RunOptions {
     /// Overrides the scenario's seed.
     pub seed: Option<u64>,
 }
-
-/// L0 in metres (1 µm).
-const L0_M: f64 = 1e-6;
 
 /// The core's configuration for a scenario: Table 2 defaults, the scenario's
 /// front end, nominal design (with zero rate: the design knows no rotation) and

@@ -30,9 +30,9 @@ use crate::trace::TraceRow;
 /// Reference length L0 of the non-dimensional displacements, m (1 µm).
 pub const L0_M: f64 = 1e-6;
 
-/// Drive natural frequency ω0/2π implied by Table 2 (γ = 3.8581e-5 ⇔ 150 °/s, so
-/// ω0 = 2.618/3.8581e-5 rad/s ≈ 67 857 rad/s), Hz.
-pub const DEFAULT_F0_HZ: f64 = 2.618 / 3.8581e-5 / (2.0 * PI);
+/// Drive natural frequency ω0/2π implied by Table 2 (the core's
+/// [`physics::OMEGA0_TABLE2_RAD_S`]: γ = 3.8581e-5 ⇔ 150 °/s), Hz.
+pub const DEFAULT_F0_HZ: f64 = physics::OMEGA0_TABLE2_RAD_S / (2.0 * PI);
 
 /// The built-in scenarios: (name, one-line description, embedded TOML, file name).
 const BUILTINS: [(&str, &str, &str, &str); 5] = [
@@ -138,19 +138,21 @@ pub struct PlantSpec {
 }
 
 impl Default for PlantSpec {
-    /// Table 2 of the paper, 150 °/s, 10 g on both axes, X(0) = 0.01 µm.
+    /// Table 2 of the paper (the core's [`physics::TABLE2`]), 150 °/s, 10 g on both axes,
+    /// X(0) = 0.01 µm.
     fn default() -> Self {
+        let t = &physics::TABLE2;
         Self {
-            mu_x: 1e-3,
-            mu_y: 1e-3,
-            mu_xy: 1e-4,
-            wx2: 1.0,
-            wy2: 1.0265,
-            wxy2: 2e-3,
-            alpha_x: 0.002303,
-            alpha_y: 0.001264,
-            beta1: 0.0226,
-            beta3: 6.33e-5,
+            mu_x: t.mu_x,
+            mu_y: t.mu_y,
+            mu_xy: t.mu_xy,
+            wx2: t.wx2,
+            wy2: t.wy2,
+            wxy2: t.wxy2,
+            alpha_x: t.alpha_x,
+            alpha_y: t.alpha_y,
+            beta1: t.beta1,
+            beta3: t.beta3,
             rate_dps: 150.0,
             rate_accel_dps2: 0.0,
             accel_x_mps2: 98.0665,

@@ -10,10 +10,8 @@ pub const THETA_DRIVE_NAMES: [&str; 8] = [
 /// Names of the 6 sense parameters θ2 (eq. 25 order).
 pub const THETA_SENSE_NAMES: [&str; 6] = ["th21", "th22", "th23", "th24", "th25", "th26"];
 /// Physical parameters recovered by the corrected Table 3, in this order.
-pub const PHYS_NAMES: [&str; 12] = [
-    "mu_x", "mu_y", "mu_xy", "wx2", "wy2", "wxy2", "alpha_x", "alpha_y", "beta1", "beta3", "gamma",
-    "gamma_p",
-];
+/// (The core's `physics::PHYSICAL_NAMES`.)
+pub const PHYS_NAMES: [&str; 12] = paragyro_core::physics::PHYSICAL_NAMES;
 /// Health flags in bit order (bit i of `TraceRow::health` is `HEALTH_NAMES[i]`).
 pub const HEALTH_NAMES: [&str; 8] = [
     "inputs_valid",
