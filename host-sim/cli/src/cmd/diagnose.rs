@@ -1,0 +1,94 @@
+//! `paragyro-sim diagnose FILE.csv --out DIR`: where a record departs from the simulator,
+//! which effect causes it, how far the gap shrinks once it is added (docs/diagnosis.md).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use super::{Ctx, EXIT_RUN, Failure, fail, load, note, read_record_warn};
+use paragyro_diagnose::diagnose::{Model, Options, diagnose, write_report};
+
+/// Diagnose the gap between a record and the simulator: where it lies, which effect
+/// causes it, how far it shrinks once that effect is added (report.md, report.json, PNGs).
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The record (CSV, docs/record-format.md). Its truth file is never read.
+    pub record: PathBuf,
+    /// Output directory (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The simulator configuration to compare with: a built-in scenario name or a
+    /// scenario TOML (its plant at t = 0); default Table 2.
+    #[arg(long, value_name = "SCENARIO")]
+    pub model: Option<String>,
+    /// Skip the re-simulation (no output error, faster).
+    #[arg(long)]
+    pub no_resim: bool,
+}
+
+/// Diagnoses the record, writes the report, prints the verdict and the top candidates.
+pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
+    let file = &a.record;
+    let rec = read_record_warn(file)?;
+    let mut opts = Options {
+        resimulate: !a.no_resim,
+        ..Default::default()
+    };
+    if let Some(m) = &a.model {
+        opts.model = Model::from_scenario(&load(m)?);
+    }
+    note(&format!(
+        "diagnosing {} ({} samples, {:.1} s){}",
+        file.display(),
+        rec.rows.len(),
+        rec.duration_s(),
+        if opts.resimulate {
+            ", with the re-simulation"
+        } else {
+            ""
+        }
+    ));
+    let d = diagnose(&rec, &opts)
+        .with_context(|| format!("cannot diagnose {}", file.display()))
+        .map_err(fail(EXIT_RUN))?;
+    let name = file
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let files = write_report(&a.out, &d, &name).map_err(fail(EXIT_RUN))?;
+    let j = &d.json;
+    let mut text = format!(
+        "Verdict: {}{}\n",
+        d.verdict,
+        j["secondary"]["effect"]
+            .as_str()
+            .map(|e| format!(" (and {e})"))
+            .unwrap_or_default()
+    );
+    for c in d.ranking.iter().filter(|c| c.untestable.is_none()).take(3) {
+        text.push_str(&format!(
+            "  {:<24} size {:.4e} ± {:.1e} {}  gap closure {:5.1} %{}\n",
+            c.effect,
+            c.size,
+            c.size_sigma,
+            paragyro_simulator::effects::unit(&c.effect),
+            100.0 * c.gap_closure,
+            if c.significant { "  significant" } else { "" }
+        ));
+    }
+    text.push_str(&format!(
+        "Held-out gap: {:.4e} → {:.4e} ({:.1} % closed); output error closure {}\n",
+        j["gap_before"].as_f64().unwrap_or(f64::NAN),
+        j["gap_after"].as_f64().unwrap_or(f64::NAN),
+        100.0 * j["gap_closure"].as_f64().unwrap_or(f64::NAN),
+        j["output_error"]["closure"]
+            .as_f64()
+            .map_or("not computed".into(), |v| format!("{:.1} %", 100.0 * v))
+    ));
+    text.push_str(&format!(
+        "Took {:.2} s. Wrote {} files to {}\n",
+        j["seconds"].as_f64().unwrap_or(f64::NAN),
+        files.len(),
+        a.out.display()
+    ));
+    ctx.say(&text)
+}
