@@ -259,7 +259,9 @@ pub fn config_slots(c: &Config) -> [f64; CFG_SLOTS] {
         n.mu_x, n.mu_y, n.mu_xy, n.wx2, n.wy2, n.wxy2, n.alpha_x, n.alpha_y, n.beta1, n.beta3,
         n.gamma, n.gamma_p, n.c_ax, n.c_ay,
     ];
-    s[cfg::NOMINAL..cfg::NOMINAL + nominal.len()].copy_from_slice(&nominal);
+    for (slot, v) in s.iter_mut().skip(cfg::NOMINAL).zip(nominal) {
+        *slot = v;
+    }
     s[cfg::PUMP_CENTRE_HZ] = c.pump_centre_hz;
     s[cfg::DITHER_ENABLED] = b(c.dither.enabled);
     s[cfg::DITHER_PUMP_HZ] = c.dither.pump_hz;
