@@ -39,8 +39,8 @@ fn identify_full_length_f32_and_f64() {
             "{precision:?}: all θ within 10 % only from {t:.3} s"
         );
         // no parameter change: the change detector stays quiet, no retune needed
-        assert_eq!(r.summary["counters"]["resets_drive"], 0, "{precision:?}");
-        assert_eq!(r.summary["counters"]["resets_sense"], 0, "{precision:?}");
+        assert_eq!(r.summary.counters.resets_drive, 0, "{precision:?}");
+        assert_eq!(r.summary.counters.resets_sense, 0, "{precision:?}");
     }
 }
 
@@ -114,9 +114,9 @@ fn drift_retune() {
         );
     }
     let s = &r.summary;
-    let before = s["sense_amp_before_drift"].as_f64().unwrap();
-    let after_drift = s["sense_amp_after_drift"].as_f64().unwrap();
-    let after_retune = s["sense_amp_after_retune"].as_f64().unwrap();
+    let before = s.measure("sense_amp_before_drift").unwrap();
+    let after_drift = s.measure("sense_amp_after_drift").unwrap();
+    let after_retune = s.measure("sense_amp_after_retune").unwrap();
     assert!((before - 1.496).abs() < 0.01, "before drift {before}");
     assert!(
         after_retune >= before,
@@ -127,19 +127,13 @@ fn drift_retune() {
         loss < 0.6 && loss > 0.45,
         "twin without retune: {loss:.3} of the amplitude (prototype 0.52)"
     );
-    assert!(
-        s["counters"]["retunes"].as_u64().unwrap() >= 1,
-        "no retune happened"
-    );
-    assert!(
-        s["counters"]["resets_sense"].as_u64().unwrap() >= 1,
-        "the drift was not detected"
-    );
-    let wy2 = s["wy2_est_final"].as_f64().unwrap();
+    assert!(s.counters.retunes >= 1, "no retune happened");
+    assert!(s.counters.resets_sense >= 1, "the drift was not detected");
+    let wy2 = s.wy2_est_final;
     assert!(rel(wy2, 1.03) < 1e-5);
     // the pump centre now sits at 2·sqrt(ω̂y²)·f0
-    let f0 = 2.618 / 3.8581e-5 / (2.0 * std::f64::consts::PI);
-    let centre = s["pump_centre_final_hz"].as_f64().unwrap();
+    let f0 = paragyro_simulator::scenario::DEFAULT_F0_HZ;
+    let centre = s.pump_centre_final_hz;
     assert!(
         (centre - 2.0 * 1.03f64.sqrt() * f0).abs() < 1.0,
         "pump centre {centre} Hz"

@@ -14,4 +14,5 @@ pub mod report;
 pub mod results;
 pub mod runner;
 pub mod scenario;
+pub mod summary;
 pub mod trace;

@@ -38,7 +38,9 @@ use serde_json::{Map, Value, json};
 
 use crate::runner::{self, Precision};
 use crate::scenario::{L0_M, PlantAt, Scenario};
+use crate::summary::{PhysicalValues, ThetaPair};
 use crate::trace::{HEALTH_NAMES, PHYS_NAMES, THETA_DRIVE_NAMES, THETA_SENSE_NAMES};
+use serde::Serialize;
 
 // ---------------------------------------------------------------------------------------------
 // The format
@@ -1435,6 +1437,97 @@ pub fn write_replay_csv<W: Write>(mut w: W, rows: &[ReplayRow]) -> anyhow::Resul
     Ok(())
 }
 
+/// The core configuration a replay ran with (the part `summary.json` shows).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[allow(missing_docs)]
+pub struct ReplayConfig {
+    pub f0_hz: f64,
+    pub fs_hz: f64,
+    pub pump_centre_hz: f64,
+    pub lockin_lpf_order: usize,
+    pub lockin_lpf_hz: f64,
+    pub noise_pm_rthz: f64,
+}
+
+/// The core's counters at the end of a replay.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[allow(missing_docs)]
+pub struct ReplayCounters {
+    pub samples: u32,
+    pub updates: u32,
+    pub bad_samples: u32,
+    pub non_finite: u32,
+    pub saturated: u32,
+    pub stuck: u32,
+    pub resets_drive: u32,
+    pub resets_sense: u32,
+    pub retunes: u32,
+    pub retune_aborts: u32,
+}
+
+impl From<&Counters> for ReplayCounters {
+    fn from(c: &Counters) -> Self {
+        ReplayCounters {
+            samples: c.samples,
+            updates: c.updates,
+            bad_samples: c.bad_samples,
+            non_finite: c.non_finite,
+            saturated: c.saturated,
+            stuck: c.stuck,
+            resets_drive: c.resets_drive,
+            resets_sense: c.resets_sense,
+            retunes: c.retunes,
+            retune_aborts: c.retune_aborts,
+        }
+    }
+}
+
+/// The estimates at the end of a replay (absent when the record had no row).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReplayFinal {
+    /// θ̂ after the last sample (`{"drive": {"th11": ..}, "sense": {..}}`).
+    #[serde(serialize_with = "crate::summary::theta_named")]
+    pub theta_est: ThetaPair<f64>,
+    /// Physical parameters from θ̂.
+    pub physical_est: PhysicalValues,
+    /// Estimated rate after the last sample, °/s.
+    pub rate_dps_est: f64,
+    /// ω̂y² after the last sample.
+    pub wy2_est: f64,
+    /// Mean of the finite rate estimates over the last second, °/s.
+    pub rate_dps_est_mean_last_1s: Option<f64>,
+    /// Mean of the record's `rate_ref_dps` over the last second, °/s (when it has it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rate_ref_dps_mean_last_1s: Option<f64>,
+    /// The difference of the two means, °/s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rate_err_dps_last_1s: Option<f64>,
+    /// Health flags set after the last sample (names of [`HEALTH_NAMES`]).
+    pub health_final: Vec<&'static str>,
+    /// The core's counters at the end.
+    pub counters: ReplayCounters,
+}
+
+/// `summary.json` of a replay.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReplaySummary {
+    /// The record (as named by the caller).
+    pub record: String,
+    /// Core precision.
+    pub precision: Precision,
+    /// Rows replayed.
+    pub samples: usize,
+    /// Duration of the record, s.
+    pub duration_s: f64,
+    /// The reader's warnings.
+    pub warnings: Vec<String>,
+    /// The core configuration.
+    pub config: ReplayConfig,
+    /// The final estimates (its fields are top-level keys of `summary.json`).
+    #[serde(flatten)]
+    pub last: Option<ReplayFinal>,
+}
+
 /// The summary of a replay: final θ̂ and physical parameters, rate (and its error against
 /// `rate_ref_dps` over the last second, when the record has it), health, counters.
 pub fn replay_summary(
@@ -1443,49 +1536,34 @@ pub fn replay_summary(
     cfg: &Config,
     precision: Precision,
     rows: &[ReplayRow],
-) -> Value {
-    let mut m = Map::new();
-    m.insert("record".into(), json!(source));
-    m.insert("precision".into(), json!(precision.name()));
-    m.insert("samples".into(), json!(rows.len()));
-    m.insert("duration_s".into(), json!(rec.duration_s()));
-    m.insert("warnings".into(), json!(rec.warnings));
-    m.insert(
-        "config".into(),
-        json!({
-            "f0_hz": cfg.f0_hz, "fs_hz": cfg.fs_hz, "pump_centre_hz": cfg.pump_centre_hz,
-            "lockin_lpf_order": cfg.lockin_lpf_order, "lockin_lpf_hz": cfg.lockin_lpf_hz,
-            "noise_pm_rthz": cfg.noise_pm_rthz,
-        }),
-    );
-    let Some(last) = rows.last() else {
-        return Value::Object(m);
+) -> ReplaySummary {
+    let config = ReplayConfig {
+        f0_hz: cfg.f0_hz,
+        fs_hz: cfg.fs_hz,
+        pump_centre_hz: cfg.pump_centre_hz,
+        lockin_lpf_order: cfg.lockin_lpf_order,
+        lockin_lpf_hz: cfg.lockin_lpf_hz,
+        noise_pm_rthz: cfg.noise_pm_rthz,
     };
-    let named = |names: &[&str], v: &[f64]| {
-        let mut o = Map::new();
-        for (n, x) in names.iter().zip(v) {
-            o.insert((*n).into(), json!(x));
-        }
-        Value::Object(o)
-    };
-    m.insert(
-        "theta_est".into(),
-        json!({
-            "drive": named(&THETA_DRIVE_NAMES, &last.theta_drive),
-            "sense": named(&THETA_SENSE_NAMES, &last.theta_sense),
-        }),
-    );
+    ReplaySummary {
+        record: source.to_string(),
+        precision,
+        samples: rows.len(),
+        duration_s: rec.duration_s(),
+        warnings: rec.warnings.clone(),
+        config,
+        last: rows.last().map(|last| replay_final(rec, rows, last)),
+    }
+}
+
+fn replay_final(rec: &Record, rows: &[ReplayRow], last: &ReplayRow) -> ReplayFinal {
     let phys = physical_from_theta(&last.theta_drive, &last.theta_sense).as_array();
-    m.insert("physical_est".into(), named(&PHYS_NAMES, &phys[..12]));
-    m.insert("rate_dps_est".into(), json!(last.rate_dps));
-    m.insert("wy2_est".into(), json!(last.wy2));
     let tail: Vec<&ReplayRow> = rows
         .iter()
         .filter(|r| r.t_s >= last.t_s - 1.0 && r.rate_dps.is_finite())
         .collect();
     let mean_rate = (!tail.is_empty())
         .then(|| tail.iter().map(|r| r.rate_dps).sum::<f64>() / tail.len() as f64);
-    m.insert("rate_dps_est_mean_last_1s".into(), json!(mean_rate));
     let refs: Vec<f64> = rec
         .rows
         .iter()
@@ -1493,31 +1571,26 @@ pub fn replay_summary(
         .filter_map(|r| r.rate_ref_dps)
         .filter(|v| v.is_finite())
         .collect();
-    if !refs.is_empty() {
-        let rr = refs.iter().sum::<f64>() / refs.len() as f64;
-        m.insert("rate_ref_dps_mean_last_1s".into(), json!(rr));
-        if let Some(e) = mean_rate {
-            m.insert("rate_err_dps_last_1s".into(), json!(e - rr));
-        }
+    let ref_mean = (!refs.is_empty()).then(|| refs.iter().sum::<f64>() / refs.len() as f64);
+    ReplayFinal {
+        theta_est: ThetaPair {
+            drive: last.theta_drive,
+            sense: last.theta_sense,
+        },
+        physical_est: PhysicalValues::from_array(phys),
+        rate_dps_est: last.rate_dps,
+        wy2_est: last.wy2,
+        rate_dps_est_mean_last_1s: mean_rate,
+        rate_ref_dps_mean_last_1s: ref_mean,
+        rate_err_dps_last_1s: ref_mean.and_then(|rr| Some(mean_rate? - rr)),
+        health_final: HEALTH_NAMES
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| last.health & (1 << i) != 0)
+            .map(|(_, n)| *n)
+            .collect(),
+        counters: ReplayCounters::from(&last.counters),
     }
-    let flags: Vec<&str> = HEALTH_NAMES
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| last.health & (1 << i) != 0)
-        .map(|(_, n)| *n)
-        .collect();
-    m.insert("health_final".into(), json!(flags));
-    let c = last.counters;
-    m.insert(
-        "counters".into(),
-        json!({
-            "samples": c.samples, "updates": c.updates, "bad_samples": c.bad_samples,
-            "non_finite": c.non_finite, "saturated": c.saturated, "stuck": c.stuck,
-            "resets_drive": c.resets_drive, "resets_sense": c.resets_sense,
-            "retunes": c.retunes, "retune_aborts": c.retune_aborts,
-        }),
-    );
-    Value::Object(m)
 }
 
 /// What [`write_replay`] produced.
@@ -1526,7 +1599,7 @@ pub struct ReplayOutputs {
     /// The files written (`estimates.csv`, `summary.json`).
     pub files: Vec<PathBuf>,
     /// The summary (as written to `summary.json`).
-    pub summary: Value,
+    pub summary: ReplaySummary,
     /// A few lines for people.
     pub text: String,
 }
@@ -1553,7 +1626,7 @@ pub fn write_replay(
         .with_context(|| format!("cannot write {}", csv.display()))?;
     let summary = replay_summary(rec, source, &cfg, precision, &rows);
     let sj = dir.join("summary.json");
-    std::fs::write(&sj, serde_json::to_string_pretty(&summary)? + "\n")
+    std::fs::write(&sj, crate::summary::to_json_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", sj.display()))?;
     let mut text = format!(
         "Replayed {source}: {} samples ({:.3} s) with the {} core (pump centre {:.3} Hz from the record)\n",
@@ -1568,13 +1641,10 @@ pub fn write_replay(
             "  final: rate {:.4} °/s, ωy² {:.6}, health [{}], {} bad samples, {} resets",
             last.rate_dps,
             last.wy2,
-            summary["health_final"]
-                .as_array()
-                .map(|a| a
-                    .iter()
-                    .filter_map(|v| v.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", "))
+            summary
+                .last
+                .as_ref()
+                .map(|f| f.health_final.join(", "))
                 .unwrap_or_default(),
             last.counters.bad_samples,
             last.counters.resets_drive + last.counters.resets_sense

@@ -12,10 +12,9 @@
 //! | `physical.png` | the 12 physical parameters (Figs 12–14) and the rate in °/s |
 //! | `amplitudes_pump.png` | sense/drive amplitudes (with the twin run), pump frequency and centre, retune and change-detection periods |
 //!
-//! Conventions of the `summary` JSON that this module reads (all optional; the runner writes
-//! them): numbers under any key containing `sense_amp` are listed with their ratios;
-//! `twin_label` (string, at the top level) names the twin run in legends (default
-//! "without retune").
+//! The text summaries read the typed [`RunSummary`]: the scenario's measures whose name
+//! contains `sense_amp` are listed with their ratios, the other scalar values one group per
+//! line.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -26,6 +25,7 @@ use anyhow::{Context, Result};
 use plotters::prelude::*;
 
 use crate::plot::*;
+use crate::summary::RunSummary;
 use crate::trace::{
     HEALTH_NAMES, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow,
 };
@@ -73,8 +73,8 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
 
     let path = dir.join("summary.json");
-    let json = serde_json::to_string_pretty(&result.summary)?;
-    fs::write(&path, json + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+    let json = result.summary.to_json_pretty()?;
+    fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))?;
     files.push(path);
 
     let path = dir.join("trace.csv");
@@ -253,7 +253,6 @@ fn settle_time(trace: &[TraceRow]) -> f64 {
         _ => 0.0,
     }
 }
-
 
 /// The p-quantile (0..=1) of finite values.
 fn quantile(mut v: Vec<f64>, p: f64) -> Option<f64> {
@@ -594,13 +593,10 @@ fn band(x0: f64, x1: f64, min_w: f64, color: RGBAColor) -> Band {
     }
 }
 
-/// The twin run's legend label: `summary.twin_label` if the runner gives one; else
-/// "without retune" when the pump centres of the two runs differ; else the plant parameters
-/// in which the twin differs (e.g. "twin: ωy² = 1.03"); else "twin run".
+/// The twin run's legend label: "without retune" when the pump centres of the two runs
+/// differ; else the plant parameters in which the twin differs (e.g. "twin: ωy² = 1.03");
+/// else "twin run".
 fn twin_label(result: &RunResult) -> String {
-    if let Some(l) = result.summary.get("twin_label").and_then(|v| v.as_str()) {
-        return l.to_string();
-    }
     let Some(twin) = result.twin.as_deref() else {
         return "twin run".into();
     };
@@ -724,52 +720,29 @@ fn plot_amplitudes_pump(path: &Path, result: &RunResult) -> Result<()> {
 // Text summaries
 // ---------------------------------------------------------------------------------------------
 
-/// Scalar values of a JSON tree as (dotted path, value).
-fn flatten_json(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, serde_json::Value)>) {
-    match v {
-        serde_json::Value::Object(m) => {
-            for (k, v) in m {
-                let p = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten_json(&p, v, out);
-            }
-        }
-        serde_json::Value::Array(_) => {}
-        other => out.push((prefix.to_string(), other.clone())),
-    }
-}
-
-/// The `sense_amp*` numbers of the summary, and their ratios to a reference (the one whose
-/// name contains "before", else ends in "_tuned", else the first).
-fn sense_amp_lines(result: &RunResult) -> Vec<String> {
-    let mut flat = Vec::new();
-    flatten_json("", &result.summary, &mut flat);
-    let amps: Vec<(String, f64)> = flat
+/// The measures of the summary whose name contains `sense_amp` (not `ratio`) and that have a
+/// value, and their ratios to a reference (the one whose name contains "before", else ends
+/// in "_tuned", else the first).
+fn sense_amp_lines(summary: &RunSummary) -> Vec<String> {
+    let amps: Vec<(&str, f64)> = summary
+        .measures
         .iter()
-        .filter(|(k, _)| {
-            k.rsplit('.')
-                .next()
-                .is_some_and(|leaf| leaf.contains("sense_amp") && !leaf.contains("ratio"))
-        })
-        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+        .filter(|(k, _)| k.contains("sense_amp") && !k.contains("ratio"))
+        .filter_map(|(k, v)| v.map(|x| (k.as_str(), x)))
         .collect();
     if amps.is_empty() {
         return Vec::new();
     }
-    let leaf = |k: &str| k.rsplit('.').next().unwrap_or(k).to_string();
     let reference = amps
         .iter()
-        .position(|(k, _)| leaf(k).contains("before"))
-        .or_else(|| amps.iter().position(|(k, _)| leaf(k).ends_with("_tuned")))
+        .position(|(k, _)| k.contains("before"))
+        .or_else(|| amps.iter().position(|(k, _)| k.ends_with("_tuned")))
         .unwrap_or(0);
-    let (ref_name, ref_v) = (leaf(&amps[reference].0), amps[reference].1);
+    let (ref_name, ref_v) = amps[reference];
     let mut lines = vec!["Sense amplitude measures (mean |B1|):".to_string()];
     for (k, v) in &amps {
-        let mut line = format!("  {:<28} {:>9.4} µm", leaf(k), v);
-        if leaf(k) != ref_name && ref_v != 0.0 {
+        let mut line = format!("  {k:<28} {v:>9.4} µm");
+        if *k != ref_name && ref_v != 0.0 {
             let _ = write!(line, "   = {:.3} × {ref_name}", v / ref_v);
         }
         lines.push(line);
@@ -777,24 +750,130 @@ fn sense_amp_lines(result: &RunResult) -> Vec<String> {
     lines
 }
 
-/// A JSON scalar for the text summary (numbers with 6 significant digits).
-fn fmt_json(v: &serde_json::Value) -> String {
-    match v {
-        serde_json::Value::Number(n) => match (n.as_i64(), n.as_f64()) {
-            (Some(i), _) => i.to_string(),
-            (None, Some(x)) => {
-                let a = x.abs();
-                if x == 0.0 || (1e-3..1e6).contains(&a) {
-                    format!("{}", (x * 1e6).round() / 1e6)
-                } else {
-                    format!("{x:.5e}")
-                }
-            }
-            _ => n.to_string(),
-        },
-        serde_json::Value::String(t) => t.clone(),
-        other => other.to_string(),
+/// A scalar of the summary as the text summary shows it.
+#[derive(Clone, Copy, Debug)]
+enum Scalar {
+    /// A count.
+    Int(u64),
+    /// A number (non-finite: shown as `null`, as in the JSON).
+    Float(f64),
+    /// Absent (an optional value without data).
+    Null,
+}
+
+impl From<f64> for Scalar {
+    fn from(x: f64) -> Self {
+        Scalar::Float(x)
     }
+}
+
+impl From<u32> for Scalar {
+    fn from(x: u32) -> Self {
+        Scalar::Int(x.into())
+    }
+}
+
+impl From<Option<f64>> for Scalar {
+    fn from(x: Option<f64>) -> Self {
+        x.map_or(Scalar::Null, Scalar::Float)
+    }
+}
+
+/// A scalar for the text summary (numbers with 6 significant digits).
+fn fmt_scalar(v: Scalar) -> String {
+    let float = |x: f64| {
+        let a = x.abs();
+        if x == 0.0 || (1e-3..1e6).contains(&a) {
+            format!("{}", (x * 1e6).round() / 1e6)
+        } else {
+            format!("{x:.5e}")
+        }
+    };
+    match v {
+        Scalar::Int(i) if i <= i64::MAX as u64 => i.to_string(),
+        Scalar::Int(i) => float(i as f64),
+        Scalar::Float(x) if x.is_finite() => float(x),
+        Scalar::Float(_) | Scalar::Null => "null".into(),
+    }
+}
+
+/// The summary values the text summary does not show elsewhere, as (key, line) in key
+/// order: one line per group (`parent: k v, k v`) or per top-level value (`k: v`). The
+/// sense-amplitude measures and ratios, θ, the physical parameters and the rates have
+/// their own sections.
+fn summary_value_lines(s: &RunSummary) -> Vec<(String, String)> {
+    let group = |parent: &str, items: &[(&str, Scalar)]| {
+        let list: Vec<String> = items
+            .iter()
+            .map(|(k, v)| format!("{k} {}", fmt_scalar(*v)))
+            .collect();
+        (parent.to_string(), format!("{parent}: {}", list.join(", ")))
+    };
+    let settle = |p: &crate::summary::ThetaPair<Option<f64>>| -> Vec<(&str, Scalar)> {
+        let names = THETA_DRIVE_NAMES.iter().chain(&THETA_SENSE_NAMES);
+        let vals = p.drive.iter().chain(&p.sense);
+        names
+            .zip(vals)
+            .map(|(n, v)| (*n, Scalar::from(*v)))
+            .collect()
+    };
+    let conv = &s.convergence_after_dither_start;
+    let c = &s.counters;
+    let mut out = vec![
+        group(
+            "convergence_after_dither_start.within_10pct_s",
+            &settle(&conv.within_10pct_s),
+        ),
+        group(
+            "convergence_after_dither_start.within_1pct_s",
+            &settle(&conv.within_1pct_s),
+        ),
+        group(
+            "counters",
+            &[
+                ("bad_samples", c.bad_samples.into()),
+                ("jumps", c.jumps.into()),
+                ("resets_drive", c.resets_drive.into()),
+                ("resets_sense", c.resets_sense.into()),
+                ("retune_aborts", c.retune_aborts.into()),
+                ("retunes", c.retunes.into()),
+                ("samples", c.samples.into()),
+                ("updates", c.updates.into()),
+            ],
+        ),
+    ];
+    let mut top: Vec<(&str, Scalar)> = vec![
+        ("pump_centre_final_hz", s.pump_centre_final_hz.into()),
+        ("rate_rel_err", s.rate_rel_err.into()),
+        ("seed", Scalar::Int(s.seed)),
+        ("sim_seconds", s.sim_seconds.into()),
+        ("wall_seconds", s.wall_seconds.into()),
+        ("wy2_est_final", s.wy2_est_final.into()),
+        ("wy2_true_final", s.wy2_true_final.into()),
+    ];
+    if let Some(v) = s.twin_pump_centre_final_hz {
+        top.push(("twin_pump_centre_final_hz", v.into()));
+    }
+    // (as the sections above: θ, physical, rates, names)
+    let shown = [
+        "physical_true",
+        "physical_est",
+        "theta_",
+        "rate_dps_",
+        "scenario",
+        "precision",
+    ];
+    for (k, v) in &s.measures {
+        if !k.contains("sense_amp") && !shown.iter().any(|p| k.starts_with(p)) {
+            top.push((k, (*v).into()));
+        }
+    }
+    out.extend(
+        top.into_iter()
+            .map(|(k, v)| (k.to_string(), format!("{k}: {}", fmt_scalar(v)))),
+    );
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
 }
 
 /// Names of the health flags set in `health`.
@@ -905,25 +984,9 @@ pub fn print_summary(result: &RunResult) -> String {
         "Pump centre: {:.2} Hz at the start, {:.2} Hz at the end",
         tr[0].pump_centre_hz, last.pump_centre_hz
     );
-    // With f0 in the summary: where the pump should sit, 2·√(−θ22)·f0 (FINDINGS §5).
-    let mut flat = Vec::new();
-    flatten_json("", &result.summary, &mut flat);
-    let f0 = flat
-        .iter()
-        .find(|(k, _)| k.rsplit('.').next() == Some("f0_hz"))
-        .and_then(|(_, v)| v.as_f64());
-    match f0 {
-        Some(f0) if last.theta_sense_true[1] < 0.0 => {
-            let _ = writeln!(
-                s,
-                " (2·√(ωy²−γ²)·f0 of the true plant at the end: {:.2} Hz)",
-                2.0 * (-last.theta_sense_true[1]).sqrt() * f0
-            );
-        }
-        _ => s.push('\n'),
-    }
+    s.push('\n');
 
-    let amps = sense_amp_lines(result);
+    let amps = sense_amp_lines(&result.summary);
     if !amps.is_empty() {
         s.push('\n');
         for l in amps {
@@ -931,44 +994,12 @@ pub fn print_summary(result: &RunResult) -> String {
         }
     }
 
-    let mut flat = Vec::new();
-    flatten_json("", &result.summary, &mut flat);
-    // Values not shown above, grouped by parent key (one line per group).
-    let shown = [
-        "physical_true",
-        "physical_est",
-        "theta_",
-        "rate_dps_",
-        "scenario",
-        "precision",
-    ];
-    let others: Vec<_> = flat
-        .into_iter()
-        .filter(|(k, _)| !k.contains("sense_amp") && !shown.iter().any(|p| k.starts_with(p)))
-        .collect();
+    // Values not shown above, one line per group.
+    let others = summary_value_lines(&result.summary);
     if !others.is_empty() {
         let _ = writeln!(s, "\nSummary values:");
-        let mut groups: Vec<(String, Vec<(String, serde_json::Value)>)> = Vec::new();
-        for (k, v) in others {
-            let (parent, leaf) = k.rsplit_once('.').unwrap_or(("", &k));
-            let (parent, leaf) = (parent.to_string(), leaf.to_string());
-            match groups.last_mut() {
-                Some((p, items)) if *p == parent && !parent.is_empty() => items.push((leaf, v)),
-                _ => groups.push((parent, vec![(leaf, v)])),
-            }
-        }
-        for (parent, items) in groups.iter().take(40) {
-            if parent.is_empty() {
-                for (k, v) in items {
-                    let _ = writeln!(s, "  {k}: {}", fmt_json(v));
-                }
-            } else {
-                let list: Vec<String> = items
-                    .iter()
-                    .map(|(k, v)| format!("{k} {}", fmt_json(v)))
-                    .collect();
-                let _ = writeln!(s, "  {parent}: {}", list.join(", "));
-            }
+        for (_, line) in others.iter().take(40) {
+            let _ = writeln!(s, "  {line}");
         }
     }
 
@@ -1024,7 +1055,7 @@ pub fn short_summary(result: &RunResult) -> String {
     if let Some((name, err)) = worst {
         let _ = writeln!(s, "  worst θ relative error at the end: {name} {err:.2e}");
     }
-    for l in sense_amp_lines(result) {
+    for l in sense_amp_lines(&result.summary) {
         let _ = writeln!(s, "  {l}");
     }
     let _ = writeln!(
@@ -1041,7 +1072,8 @@ pub fn short_summary(result: &RunResult) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::trace::Event;
+    use crate::summary::{Convergence, PhysicalValues, RunCounters, ThetaPair};
+    use crate::trace::{Event, Precision};
 
     fn synthetic_row(k: usize, twin: bool) -> TraceRow {
         let t = k as f64 * 0.002;
@@ -1085,10 +1117,61 @@ mod tests {
         row
     }
 
+    fn synthetic_summary() -> RunSummary {
+        let last = synthetic_row(299, false);
+        RunSummary {
+            scenario: "synthetic".into(),
+            precision: Precision::F32,
+            seed: 7,
+            sim_seconds: last.t_s,
+            theta_true: ThetaPair {
+                drive: last.theta_drive_true,
+                sense: last.theta_sense_true,
+            },
+            theta_est: ThetaPair {
+                drive: last.theta_drive_est,
+                sense: last.theta_sense_est,
+            },
+            theta_rel_err: ThetaPair::default(),
+            physical_true: PhysicalValues::from_array(last.phys_true),
+            physical_est: PhysicalValues::from_array(last.phys_est),
+            rate_dps_true: 150.0,
+            rate_dps_est: 150.2,
+            rate_rel_err: 1.3e-3,
+            wy2_true_final: 1.0265,
+            wy2_est_final: 1.0266,
+            pump_centre_final_hz: 21913.95,
+            convergence_after_dither_start: Convergence {
+                within_10pct_s: ThetaPair::from_fn(|j| (j != 3).then_some(0.25)),
+                within_1pct_s: ThetaPair::from_fn(|_| None),
+            },
+            counters: RunCounters {
+                resets_drive: 2,
+                retunes: 1,
+                ..RunCounters::default()
+            },
+            measures: [
+                ("sense_amp_before_drift", Some(1.5)),
+                ("sense_amp_after_drift", Some(0.78)),
+                ("sense_amp_after_retune", Some(1.64)),
+                ("sense_amp_missing", None),
+                ("quiet_window", None),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+            sense_amp_ratio: None,
+            sense_amp_after_drift_ratio: Some(0.52),
+            sense_amp_after_retune_ratio: Some(1.09),
+            twin_pump_centre_final_hz: Some(21883.95),
+            wall_seconds: 1.5,
+        }
+    }
+
     fn synthetic_result() -> RunResult {
         RunResult {
             scenario: "synthetic".into(),
-            precision: "f32".into(),
+            precision: Precision::F32,
             trace: (0..300).map(|k| synthetic_row(k, false)).collect(),
             events: vec![
                 Event {
@@ -1100,18 +1183,7 @@ mod tests {
                     what: "change detected".into(),
                 },
             ],
-            summary: serde_json::json!({
-                "scenario": "synthetic",
-                "rate_dps_est": 150.2,
-                "wall_seconds": 1.5,
-                "counters": { "resets_drive": 2, "retunes": 1 },
-                "sense_amp_after_retune_ratio": 1.09,
-                "measures": {
-                    "sense_amp_before_drift": 1.5,
-                    "sense_amp_after_drift": 0.78,
-                    "sense_amp_after_retune": 1.64
-                }
-            }),
+            summary: synthetic_summary(),
             twin: Some((0..300).map(|k| synthetic_row(k, true)).collect()),
         }
     }
@@ -1172,10 +1244,34 @@ mod tests {
             assert!(dir.join(want).is_file());
         }
 
-        // summary.json is the summary.
+        // summary.json is the summary, keys in alphabetical order, one per measure.
         let text = fs::read_to_string(dir.join("summary.json")).unwrap();
-        let back: serde_json::Value = serde_json::from_str(&text).unwrap();
-        assert_eq!(back, result.summary);
+        assert_eq!(text, result.summary.to_json_pretty().unwrap());
+        let keys: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("  \""))
+            .filter_map(|l| l.split('"').nth(1))
+            .collect();
+        let mut sorted = keys.clone();
+        sorted.sort_unstable();
+        assert_eq!(keys, sorted);
+        for want in [
+            "convergence_after_dither_start",
+            "quiet_window",
+            "sense_amp_before_drift",
+            "sense_amp_after_retune_ratio",
+            "twin_pump_centre_final_hz",
+            "wall_seconds",
+        ] {
+            assert!(keys.contains(&want), "{want} missing: {keys:?}");
+        }
+        assert!(
+            !keys.contains(&"sense_amp_ratio"),
+            "absent ratios are left out"
+        );
+        assert!(text.contains("\"sense_amp_missing\": null"), "{text}");
+        assert!(text.contains("\"th14\": null"), "{text}");
+        assert!(text.contains("\"precision\": \"f32\""), "{text}");
 
         // trace.csv: header, one row per sample, numbers round-trip.
         let csv = fs::read_to_string(dir.join("trace.csv")).unwrap();
@@ -1252,7 +1348,12 @@ mod tests {
             "0.520 × sense_amp_before_drift",
             "change detected",
             "wall_seconds: 1.5",
-            "counters: resets_drive 2, retunes 1",
+            "quiet_window: null",
+            "seed: 7",
+            "twin_pump_centre_final_hz: 21883.95",
+            "counters: bad_samples 0, jumps 0, resets_drive 2, resets_sense 0, \
+             retune_aborts 0, retunes 1, samples 0, updates 0",
+            "within_10pct_s: th11 0.25, th12 0.25, th13 0.25, th14 null, th15 0.25",
         ] {
             assert!(s.contains(want), "'{want}' missing from:\n{s}");
         }

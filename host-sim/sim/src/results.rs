@@ -62,17 +62,17 @@ fn line(name: &str, r: &RunResult) -> String {
                 .iter()
                 .find(|x| x.t_s >= 3.0)
                 .map(|x| rel(x.phys_est[4], x.phys_true[4]));
-            let g = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
+            let g = |v: Option<f64>| v.unwrap_or(f64::NAN);
             let _ = write!(
                 out,
                 "ω̂y² error {:.1e} at 3.0 s, final ω̂y² {:.6}; sense amplitude {:.3} µm before the drift, {:.3} µm ({:.0} %) without retune, {:.3} µm ({:.0} %) after the retune",
                 at3.unwrap_or(f64::NAN),
-                g("wy2_est_final"),
-                g("sense_amp_before_drift"),
-                g("sense_amp_after_drift"),
-                100.0 * g("sense_amp_after_drift_ratio"),
-                g("sense_amp_after_retune"),
-                100.0 * g("sense_amp_after_retune_ratio"),
+                s.wy2_est_final,
+                g(s.measure("sense_amp_before_drift")),
+                g(s.measure("sense_amp_after_drift")),
+                100.0 * g(s.sense_amp_after_drift_ratio),
+                g(s.measure("sense_amp_after_retune")),
+                100.0 * g(s.sense_amp_after_retune_ratio),
             );
         }
         "paper-switch" => {
@@ -88,13 +88,13 @@ fn line(name: &str, r: &RunResult) -> String {
             );
         }
         "paper-claim" => {
-            let g = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
+            let g = |v: Option<f64>| v.unwrap_or(f64::NAN);
             let _ = write!(
                 out,
                 "sense amplitude {:.3} µm at ωy² = 1.0265, {:.3} µm at 1.03 with the same pump: ratio {:.3} (paper: 0.20)",
-                g("sense_amp_tuned"),
-                g("sense_amp_detuned"),
-                g("sense_amp_ratio")
+                g(s.measure("sense_amp_tuned")),
+                g(s.measure("sense_amp_detuned")),
+                g(s.sense_amp_ratio)
             );
         }
         _ => {
@@ -119,9 +119,8 @@ pub fn results_table(progress: &mut dyn FnMut(&str)) -> anyhow::Result<String> {
                 },
                 &mut |_| {},
             )?;
-            let wall = r.summary["wall_seconds"].as_f64().unwrap_or(f64::NAN);
-            let sim = r.summary["sim_seconds"].as_f64().unwrap_or(f64::NAN)
-                * if r.twin.is_some() { 2.0 } else { 1.0 };
+            let wall = r.summary.wall_seconds;
+            let sim = r.summary.sim_seconds * if r.twin.is_some() { 2.0 } else { 1.0 };
             let _ = writeln!(
                 md,
                 "| `{name}` | {} | {} | {wall:.1} s for {sim:.0} s simulated |",

@@ -11,32 +11,16 @@ use std::time::Instant;
 use anyhow::Context;
 use paragyro_core::physics::{Physical, physical_from_theta};
 use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample, StepOutput};
-use serde_json::{Map, Value, json};
+use std::collections::BTreeMap;
 
 use crate::effects::Effects;
 use crate::lockin::LockinOut;
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, PumpProfileSpec, Scenario};
-use crate::trace::{Event, PHYS_NAMES, RunResult, THETA_DRIVE_NAMES, THETA_SENSE_NAMES, TraceRow};
+use crate::summary::{Convergence, PhysicalValues, RunCounters, RunSummary, ThetaPair};
+use crate::trace::{Event, RunResult, TraceRow};
 
-/// Precision of the core instantiation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Precision {
-    /// `Estimator<f32>`: what runs on the chip.
-    F32,
-    /// `Estimator<f64>`: host reference.
-    F64,
-}
-
-impl Precision {
-    /// "f32" / "f64".
-    pub fn name(self) -> &'static str {
-        match self {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        }
-    }
-}
+pub use crate::trace::Precision;
 
 /// Options of one run.
 #[derive(Clone, Debug)]
@@ -144,13 +128,11 @@ pub fn run(
         None => None,
     };
     progress(1.0);
-    let mut summary = summarize(scenario, opts, &main, twin.as_ref());
-    if let Value::Object(m) = &mut summary {
-        m.insert("wall_seconds".into(), json!(wall.elapsed().as_secs_f64()));
-    }
+    let mut summary = summarize(scenario, opts, &main, twin.as_ref())?;
+    summary.wall_seconds = wall.elapsed().as_secs_f64();
     Ok(RunResult {
         scenario: scenario.name.clone(),
-        precision: opts.precision.name().into(),
+        precision: opts.precision,
         trace: main.trace,
         events: main.events,
         summary,
@@ -525,104 +507,67 @@ pub fn settle_time(rows: &[TraceRow], j: usize, tol: f64, t0: f64) -> Option<f64
     }
 }
 
-fn summarize(sc: &Scenario, opts: &RunOptions, main: &SimRun, twin: Option<&SimRun>) -> Value {
-    let last = main.trace.last().expect("a run has at least one sample");
-    let mut m = Map::new();
-    m.insert("scenario".into(), json!(sc.name));
-    m.insert("precision".into(), json!(opts.precision.name()));
-    m.insert("seed".into(), json!(opts.seed.unwrap_or(sc.seed)));
-    m.insert("sim_seconds".into(), json!(last.t_s));
-    let obj = |d: &[f64], s: &[f64]| json!({"drive": d, "sense": s});
-    m.insert(
-        "theta_true".into(),
-        obj(&last.theta_drive_true, &last.theta_sense_true),
-    );
-    m.insert(
-        "theta_est".into(),
-        obj(&last.theta_drive_est, &last.theta_sense_est),
-    );
-    let rd: Vec<f64> = (0..8)
-        .map(|j| rel(last.theta_drive_est[j], last.theta_drive_true[j]))
-        .collect();
-    let rs: Vec<f64> = (0..6)
-        .map(|j| rel(last.theta_sense_est[j], last.theta_sense_true[j]))
-        .collect();
-    m.insert("theta_rel_err".into(), obj(&rd, &rs));
-    let phys = |v: &[f64; 12]| {
-        let mut o = Map::new();
-        for (n, x) in PHYS_NAMES.iter().zip(v) {
-            o.insert((*n).into(), json!(x));
-        }
-        Value::Object(o)
+/// The summary of a run (its `wall_seconds` left at 0 for the caller).
+fn summarize(
+    sc: &Scenario,
+    opts: &RunOptions,
+    main: &SimRun,
+    twin: Option<&SimRun>,
+) -> anyhow::Result<RunSummary> {
+    let last = main
+        .trace
+        .last()
+        .ok_or_else(|| anyhow::anyhow!("scenario '{}': the run has no sample", sc.name))?;
+    let theta_true = ThetaPair {
+        drive: last.theta_drive_true,
+        sense: last.theta_sense_true,
     };
-    m.insert("physical_true".into(), phys(&last.phys_true));
-    m.insert("physical_est".into(), phys(&last.phys_est));
-    m.insert("rate_dps_true".into(), json!(last.rate_dps_true));
-    m.insert("rate_dps_est".into(), json!(last.rate_dps_est));
-    m.insert(
-        "rate_rel_err".into(),
-        json!(rel(last.rate_dps_est, last.rate_dps_true)),
-    );
-    m.insert("wy2_true_final".into(), json!(last.phys_true[4]));
-    m.insert("wy2_est_final".into(), json!(last.phys_est[4]));
-    m.insert(
-        "pump_centre_final_hz".into(),
-        json!(main.pump_centre_final_hz),
-    );
+    let theta_est = ThetaPair {
+        drive: last.theta_drive_est,
+        sense: last.theta_sense_est,
+    };
     // convergence after the dither starts
     let t0 = main.dither_start_s;
-    let mut conv = Map::new();
-    for (tol, key) in [(0.1, "within_10pct_s"), (0.01, "within_1pct_s")] {
-        let mut o = Map::new();
-        for j in 0..14 {
-            let name = if j < 8 {
-                THETA_DRIVE_NAMES[j]
-            } else {
-                THETA_SENSE_NAMES[j - 8]
-            };
-            o.insert(name.into(), json!(settle_time(&main.trace, j, tol, t0)));
-        }
-        conv.insert(key.into(), Value::Object(o));
-    }
-    m.insert("convergence_after_dither_start".into(), Value::Object(conv));
-    let c = main.counters;
-    m.insert(
-        "counters".into(),
-        json!({
-            "samples": c.samples, "updates": c.updates, "bad_samples": c.bad_samples,
-            "resets_drive": c.resets_drive, "resets_sense": c.resets_sense,
-            "retunes": c.retunes, "retune_aborts": c.retune_aborts, "jumps": c.jumps,
+    let settle = |tol: f64| ThetaPair::from_fn(|j| settle_time(&main.trace, j, tol, t0));
+    let measures: BTreeMap<String, Option<f64>> = sc
+        .measure_values(&main.trace, twin.map(|t| t.trace.as_slice()))
+        .into_iter()
+        .collect();
+    let m = |k: &str| measures.get(k).copied().flatten();
+    let ratio = |num: &str, den: &str| Some(m(num)? / m(den)?);
+    Ok(RunSummary {
+        scenario: sc.name.clone(),
+        precision: opts.precision,
+        seed: opts.seed.unwrap_or(sc.seed),
+        sim_seconds: last.t_s,
+        theta_rel_err: ThetaPair::from_fn(|j| {
+            rel(
+                theta_est.get(j).unwrap_or(f64::NAN),
+                theta_true.get(j).unwrap_or(f64::NAN),
+            )
         }),
-    );
-    let measures = sc.measure_values(&main.trace, twin.map(|t| t.trace.as_slice()));
-    let mut vals = Map::new();
-    for (name, v) in &measures {
-        m.insert(name.clone(), json!(v));
-        if let Some(v) = v {
-            vals.insert(name.clone(), json!(v));
-        }
-    }
-    let get = |k: &str| vals.get(k).and_then(|v| v.as_f64());
-    if let (Some(a), Some(b)) = (get("sense_amp_detuned"), get("sense_amp_tuned")) {
-        m.insert("sense_amp_ratio".into(), json!(a / b));
-    }
-    if let (Some(before), Some(after)) =
-        (get("sense_amp_before_drift"), get("sense_amp_after_drift"))
-    {
-        m.insert("sense_amp_after_drift_ratio".into(), json!(after / before));
-    }
-    if let (Some(before), Some(after)) =
-        (get("sense_amp_before_drift"), get("sense_amp_after_retune"))
-    {
-        m.insert("sense_amp_after_retune_ratio".into(), json!(after / before));
-    }
-    if let Some(t) = twin {
-        m.insert(
-            "twin_pump_centre_final_hz".into(),
-            json!(t.pump_centre_final_hz),
-        );
-    }
-    Value::Object(m)
+        theta_true,
+        theta_est,
+        physical_true: PhysicalValues::from_array(last.phys_true),
+        physical_est: PhysicalValues::from_array(last.phys_est),
+        rate_dps_true: last.rate_dps_true,
+        rate_dps_est: last.rate_dps_est,
+        rate_rel_err: rel(last.rate_dps_est, last.rate_dps_true),
+        wy2_true_final: last.phys_true[4],
+        wy2_est_final: last.phys_est[4],
+        pump_centre_final_hz: main.pump_centre_final_hz,
+        convergence_after_dither_start: Convergence {
+            within_10pct_s: settle(0.1),
+            within_1pct_s: settle(0.01),
+        },
+        counters: RunCounters::from(&main.counters),
+        sense_amp_ratio: ratio("sense_amp_detuned", "sense_amp_tuned"),
+        sense_amp_after_drift_ratio: ratio("sense_amp_after_drift", "sense_amp_before_drift"),
+        sense_amp_after_retune_ratio: ratio("sense_amp_after_retune", "sense_amp_before_drift"),
+        twin_pump_centre_final_hz: twin.map(|t| t.pump_centre_final_hz),
+        measures,
+        wall_seconds: 0.0,
+    })
 }
 
 /// Residual standard deviation of each regression row with the TRUE θ, per 1 pm/√Hz of

@@ -1,7 +1,38 @@
 //! The record of one simulated run: what the runner produces and what the report
-//! (summary.json, trace.csv, plots) consumes. Plain data, no behaviour.
+//! (summary.json, trace.csv, plots) consumes. Plain data, no behaviour; the summary's
+//! types are in [`crate::summary`].
+
+use std::fmt;
 
 use serde::Serialize;
+
+use crate::summary::RunSummary;
+
+/// Precision of the core instantiation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// `Estimator<f32>`: what runs on the chip.
+    F32,
+    /// `Estimator<f64>`: host reference.
+    F64,
+}
+
+impl Precision {
+    /// "f32" / "f64".
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl fmt::Display for Precision {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// Names of the 8 drive parameters θ1 (eq. 25 order), for CSV headers and plots.
 pub const THETA_DRIVE_NAMES: [&str; 8] = [
@@ -77,14 +108,14 @@ pub struct Event {
 pub struct RunResult {
     /// Scenario name.
     pub scenario: String,
-    /// "f32" or "f64".
-    pub precision: String,
+    /// Core precision.
+    pub precision: Precision,
     /// One row per 500 Hz sample.
     pub trace: Vec<TraceRow>,
     /// Events in time order.
     pub events: Vec<Event>,
     /// The summary (written as summary.json).
-    pub summary: serde_json::Value,
+    pub summary: RunSummary,
     /// A twin run's trace (e.g. `drift-retune` without the retune), if the scenario asks for one.
     pub twin: Option<Vec<TraceRow>>,
 }
