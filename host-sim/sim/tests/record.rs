@@ -846,10 +846,16 @@ fn replay_to_dir_with_f32_core() {
     assert_eq!(csv.lines().count(), rec.rows.len() + 1);
     assert!(csv.starts_with("t_s,pump_hz,pump_scale,th11_est,"));
     let s = &out.summary;
-    assert_eq!(s["precision"], "f32");
-    assert_eq!(s["samples"], 751);
-    assert_eq!(s["counters"]["bad_samples"], 0);
-    assert!(s["rate_dps_est"].as_f64().unwrap().is_finite());
+    assert_eq!(s.precision, Precision::F32);
+    assert_eq!(s.samples, 751);
+    let last = s.last.as_ref().expect("final estimates");
+    assert_eq!(last.counters.bad_samples, 0);
+    assert!(last.rate_dps_est.is_finite());
+    // summary.json is the typed summary, keys sorted
+    let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    assert_eq!(text, paragyro_simulator::summary::to_json_pretty(s).unwrap());
+    assert!(text.contains("\"precision\": \"f32\""), "{text}");
+    assert!(text.contains("\"health_final\": ["), "{text}");
     assert!(out.text.starts_with("Replayed identify.csv: 751 samples"));
     println!("{}", out.text);
     // a configuration at another rate is refused

@@ -325,7 +325,7 @@ impl NominalSpec {
 pub struct EstimatorSpec {
     /// RLS forgetting factor per 500 Hz sample, in (0, 1].
     pub forgetting: f64,
-    /// Initial pump centre 2Ω/2π, Hz; `None`: 2·√(nominal ωy²)·f0 (see [`Scenario::pump_centre_hz`]).
+    /// Initial pump centre 2Ω/2π, Hz; `None`: 2·√(nominal ωy²)·f0 (see [`super::Scenario::pump_centre_hz`]).
     pub pump_centre_hz: Option<f64>,
     /// Peak pump-frequency dither, Hz (±1e-3 of ω0 on Ω ⇔ ±21.6 Hz on the pump).
     pub dither_pump_hz: f64,
