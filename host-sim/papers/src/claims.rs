@@ -10,8 +10,8 @@
 
 use serde::Serialize;
 
-use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use paragyro_core::physics::{TABLE2, theta_from_physical};
+use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 
 /// One reading of the claim.
 #[derive(Clone, Debug, Serialize)]

@@ -1,8 +1,9 @@
 //! Reproductions of the source papers: the averaged slow flow of seed 000's gyro against
 //! the full-rate plant (`averaged`), and seed 001's Figs 3–4 (`paper001`).
 
+use paragyro_core::Cplx;
 use paragyro_papers::averaged::{
-    AveragedModel, C64, SteadyState, full_sim_envelopes, hysteresis_intervals, nearest_stable,
+    AveragedModel, SteadyState, full_sim_envelopes, hysteresis_intervals, nearest_stable,
     write_averaged_report,
 };
 use paragyro_papers::paper001::{
@@ -46,7 +47,7 @@ fn averaged_model_matches_the_full_plant_within_1_percent() {
             st.b.abs(),
             fb.abs()
         );
-        let d = |x: C64, y: C64| (x - y).abs().min((x + y).abs());
+        let d = |x: Cplx<f64>, y: Cplx<f64>| (x - y).abs().min((x + y).abs());
         assert!(d(st.a, fa) < 0.01 * fa.abs(), "A {:?} vs {fa:?}", st.a);
         assert!(d(st.b, fb) < 0.01 * fb.abs(), "B {:?} vs {fb:?}", st.b);
         // the full-rate plant itself reproduces FINDINGS §1
@@ -315,22 +316,18 @@ fn reports_are_written() {
         let md = std::fs::metadata(dir.join(f)).unwrap();
         assert!(md.len() > 1000, "{f}");
     }
-    let band = a["band"]["hb_formula_omega"].as_array().unwrap();
-    assert!((band[0].as_f64().unwrap() - 1.01125).abs() < 1e-5);
-    assert_eq!(a["paper_20pct_claim"]["reproduced"], false);
-    let ratio = a["paper_20pct_claim"]["hb_ratio"].as_f64().unwrap();
+    let band = a.band.hb_formula_omega;
+    assert!((band[0] - 1.01125).abs() < 1e-5);
+    assert!(!a.paper_20pct_claim.reproduced);
+    let ratio = a.paper_20pct_claim.hb_ratio;
     assert!((ratio - 0.526).abs() < 0.005, "{ratio}");
-    let hy = a["sweeps"]["wy2=1.0265"]["hysteresis_intervals_omega"]
-        .as_array()
-        .unwrap();
+    let sw = a.sweeps.iter().find(|s| s.wy2 == 1.0265).unwrap();
+    let hy = &sw.hysteresis_intervals_omega;
     assert_eq!(hy.len(), 1);
-    assert_eq!(p["rk4_checks_pass"], true);
-    assert_eq!(p["claims"]["family_of_parabolas"]["holds"], true);
-    assert_eq!(
-        p["claims"]["doubled_detuning_exceeds_v1"]["holds"],
-        "partly"
-    );
-    assert_eq!(p["claims"]["v0_adds_a_branch"]["holds"], true);
+    assert!(p.rk4_checks_pass);
+    assert!(p.claims.family_of_parabolas.holds);
+    assert_eq!(p.claims.doubled_detuning_exceeds_v1.holds, "partly");
+    assert!(p.claims.v0_adds_a_branch.holds);
     if keep.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -9,6 +9,7 @@ use std::sync::Once;
 
 use anyhow::Result;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
@@ -31,11 +32,25 @@ pub fn ensure_fonts() {
 
 /// A figure: white canvas with the title; returns the root and the area below the title.
 pub fn figure<'a>(path: &'a Path, title: &str) -> Result<(Area<'a>, Area<'a>)> {
+    figure_sized(path, (FIG_W, FIG_H), title)
+}
+
+/// As [`figure`] with a canvas of `size` pixels (for grids of many panels).
+pub fn figure_sized<'a>(
+    path: &'a Path,
+    size: (u32, u32),
+    title: &str,
+) -> Result<(Area<'a>, Area<'a>)> {
     ensure_fonts();
-    let root = BitMapBackend::new(path, (FIG_W, FIG_H)).into_drawing_area();
+    let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE)?;
     let body = root.titled(title, (FONT, 22).into_font().style(FontStyle::Bold))?;
     Ok((root, body))
+}
+
+/// `rows × cols` panels of `body`, row by row.
+pub fn grid<'a>(body: &Area<'a>, rows: usize, cols: usize) -> Vec<Area<'a>> {
+    body.split_evenly((rows, cols))
 }
 
 /// Offsets, in pixels, at which a line of `width` pixels is drawn as several 1-px lines
@@ -102,6 +117,46 @@ pub struct Band {
     pub color: RGBAColor,
 }
 
+/// Shape of a [`Marker`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MarkerKind {
+    /// Filled triangle pointing up.
+    TriUp,
+    /// Light triangle with a dark outline pointing down.
+    TriDown,
+    /// Filled circle.
+    Circle,
+}
+
+/// A scatter point.
+pub struct Marker {
+    pub x: f64,
+    pub y: f64,
+    pub kind: MarkerKind,
+    pub color: RGBColor,
+    /// Half-size in pixels.
+    pub size: f64,
+    pub label: Option<String>,
+}
+
+/// A vertical arrow at `x` from `y0` to `y1` (a jump).
+pub struct Arrow {
+    pub x: f64,
+    pub y0: f64,
+    pub y1: f64,
+    pub color: RGBColor,
+}
+
+/// What happens to the points of a line outside the panel's range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Clip {
+    /// y clamped into the range (a time series that leaves the axis runs along its edge).
+    #[default]
+    ClampY,
+    /// Points outside the x or y range dropped, the line split there (curves in a window).
+    Drop,
+}
+
 /// Everything one panel shows.
 pub struct Panel {
     pub caption: String,
@@ -118,7 +173,15 @@ pub struct Panel {
     pub bands: Vec<Band>,
     /// Legend entries for the bands.
     pub band_labels: Vec<(String, RGBAColor)>,
+    /// Labelled vertical lines (dashed, dark; the label at the top).
+    pub marked_x: Vec<(f64, String)>,
+    pub markers: Vec<Marker>,
+    pub arrows: Vec<Arrow>,
+    /// Points outside the range: clamped (default) or dropped.
+    pub clip: Clip,
     pub legend: Option<SeriesLabelPosition>,
+    /// Legend text size, pixels (smaller for a long legend in a small panel).
+    pub legend_font_px: u32,
 }
 
 impl Panel {
@@ -135,9 +198,25 @@ impl Panel {
             vlines: Vec::new(),
             bands: Vec::new(),
             band_labels: Vec::new(),
+            marked_x: Vec::new(),
+            markers: Vec::new(),
+            arrows: Vec::new(),
+            clip: Clip::ClampY,
             legend: None,
+            legend_font_px: 13,
         }
     }
+
+    /// A log10 y axis: the data are given as log10 values, the ticks read 1eN.
+    pub fn log_y(mut self) -> Self {
+        self.y_fmt = fmt_log_tick;
+        self
+    }
+}
+
+/// log10 of a positive value, NaN (a gap in the line) otherwise.
+pub fn log10_or_gap(v: f64) -> f64 {
+    if v > 0.0 { v.log10() } else { f64::NAN }
 }
 
 /// Axis tick label: compact, enough digits for a zoomed axis.
@@ -183,6 +262,45 @@ pub fn segments(pts: &[(f64, f64)], y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
     }
     if !cur.is_empty() {
         out.push(cur);
+    }
+    out
+}
+
+/// Splits a polyline where it leaves the panel (non-finite or outside either range);
+/// the points outside are dropped.
+pub fn segments_inside(pts: &[(f64, f64)], x: (f64, f64), y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
+    let mut out = Vec::new();
+    let mut cur = Vec::new();
+    for &(a, b) in pts {
+        let inside =
+            a.is_finite() && b.is_finite() && (x.0..=x.1).contains(&a) && (y.0..=y.1).contains(&b);
+        if inside {
+            cur.push((a, b));
+        } else if !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
+
+/// Splits a sequence into maximal runs of equal `key`, each run extended by the first
+/// point of the next one so that consecutive runs join (e.g. a branch drawn solid where
+/// stable and dashed where not).
+pub fn split_runs<T: Copy>(pts: &[T], key: impl Fn(&T) -> bool) -> Vec<(bool, Vec<T>)> {
+    let mut out: Vec<(bool, Vec<T>)> = Vec::new();
+    for p in pts {
+        let k = key(p);
+        match out.last_mut() {
+            Some((kk, seg)) if *kk == k => seg.push(*p),
+            Some((_, seg)) => {
+                seg.push(*p);
+                out.push((k, vec![*p]));
+            }
+            None => out.push((k, vec![*p])),
+        }
     }
     out
 }
@@ -240,6 +358,11 @@ pub fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
             ))?;
         }
     }
+    // the data size of one pixel (thick lines, marker and label offsets)
+    let (pw, ph) = chart.plotting_area().dim_in_pixel();
+    let dx = (x1 - x0) / f64::from(pw.max(1));
+    let dy = (y1 - y0) / f64::from(ph.max(1));
+    draw_marked_x(&mut chart, p, (dx, dy))?;
     for (v, color, label) in &p.hlines {
         if *v < y0 || *v > y1 {
             continue;
@@ -258,9 +381,6 @@ pub fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
     // Thick lines: plotters joins thick polylines with unbounded miters, which makes long
     // spikes at sharp zig-zags (jump transients). Draw them instead as 1-px polylines with a
     // brush of one-pixel offsets.
-    let (pw, ph) = chart.plotting_area().dim_in_pixel();
-    let dx = (x1 - x0) / f64::from(pw.max(1));
-    let dy = (y1 - y0) / f64::from(ph.max(1));
     for line in &p.lines {
         let thin = line.color.stroke_width(1);
         let legend_style = line.color.stroke_width(line.width.max(1));
@@ -272,7 +392,11 @@ pub fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
                 .iter()
                 .map(|&(t, v)| (t + ox * dx, v + oy * dy))
                 .collect();
-            for seg in segments(&shifted, p.y) {
+            let segs = match p.clip {
+                Clip::ClampY => segments(&shifted, p.y),
+                Clip::Drop => segments_inside(&shifted, p.x, p.y),
+            };
+            for seg in segs {
                 let anno = if line.dashed {
                     chart.draw_series(DashedLineSeries::new(seg, 8, 5, thin))?
                 } else {
@@ -287,18 +411,128 @@ pub fn draw_panel(area: &Area<'_>, p: &Panel) -> Result<()> {
             }
         }
     }
+    draw_arrows(&mut chart, p, (dx, dy))?;
+    draw_markers(&mut chart, p, (dx, dy))?;
     if let Some(pos) = &p.legend {
         chart
             .configure_series_labels()
             .position(pos.clone())
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(180, 180, 180))
-            .label_font((FONT, 13))
+            .label_font((FONT, p.legend_font_px))
             .draw()?;
     }
     Ok(())
 }
 
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A triangle of half-size `s` pixels around (x, y), pointing up or down; `px` is the data
+/// size of one pixel.
+fn triangle(x: f64, y: f64, up: bool, s: f64, px: (f64, f64)) -> Vec<(f64, f64)> {
+    let (dx, dy) = px;
+    let sg = if up { 1.0 } else { -1.0 };
+    vec![
+        (x - s * dx, y - sg * 0.8 * s * dy),
+        (x + s * dx, y - sg * 0.8 * s * dy),
+        (x, y + sg * s * dy),
+    ]
+}
+
+fn draw_marked_x(chart: &mut Chart<'_, '_>, p: &Panel, px: (f64, f64)) -> Result<()> {
+    let ((x0, x1), (y0, y1)) = (p.x, p.y);
+    for (k, (xv, label)) in p.marked_x.iter().enumerate() {
+        if *xv < x0 || *xv > x1 {
+            continue;
+        }
+        let st = RGBColor(60, 60, 60).stroke_width(1);
+        chart.draw_series(DashedLineSeries::new(vec![(*xv, y0), (*xv, y1)], 6, 4, st))?;
+        if !label.is_empty() {
+            chart.draw_series(std::iter::once(Text::new(
+                label.clone(),
+                (*xv + 4.0 * px.0, y1 - (6.0 + 18.0 * k as f64) * px.1),
+                (FONT, 13).into_font(),
+            )))?;
+        }
+    }
+    Ok(())
+}
+
+fn draw_arrows(chart: &mut Chart<'_, '_>, p: &Panel, px: (f64, f64)) -> Result<()> {
+    let ((x0, x1), (y0, y1)) = (p.x, p.y);
+    let dy = px.1;
+    for a in &p.arrows {
+        if a.x < x0 || a.x > x1 {
+            continue;
+        }
+        let (ya, yb) = (a.y0.clamp(y0, y1), a.y1.clamp(y0, y1));
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(a.x, ya), (a.x, yb)],
+            a.color.stroke_width(2),
+        )))?;
+        let up = yb > ya;
+        let head = triangle(a.x, yb - if up { 7.0 } else { -7.0 } * dy, up, 7.0, px);
+        chart.draw_series(std::iter::once(Polygon::new(head, a.color.filled())))?;
+    }
+    Ok(())
+}
+
+fn draw_markers(chart: &mut Chart<'_, '_>, p: &Panel, px: (f64, f64)) -> Result<()> {
+    let ((x0, x1), (y0, y1)) = (p.x, p.y);
+    for m in &p.markers {
+        if m.x < x0 || m.x > x1 || m.y < y0 || m.y > y1 {
+            continue;
+        }
+        let (col, s, kind) = (m.color, m.size, m.kind);
+        let shape = match kind {
+            MarkerKind::TriUp => triangle(m.x, m.y, true, s, px),
+            MarkerKind::TriDown => triangle(m.x, m.y, false, s, px),
+            MarkerKind::Circle => (0..16)
+                .map(|k| {
+                    let a = std::f64::consts::TAU * f64::from(k) / 16.0;
+                    (m.x + s * px.0 * a.cos(), m.y + s * px.1 * a.sin())
+                })
+                .collect(),
+        };
+        let fill = if kind == MarkerKind::TriDown {
+            col.mix(0.35).filled()
+        } else {
+            col.filled()
+        };
+        if kind == MarkerKind::TriDown {
+            let mut outline = shape.clone();
+            outline.push(shape[0]);
+            chart.draw_series(std::iter::once(PathElement::new(
+                outline,
+                col.stroke_width(1),
+            )))?;
+        }
+        let anno = chart.draw_series(std::iter::once(Polygon::new(shape, fill)))?;
+        if let Some(l) = &m.label {
+            anno.label(l.as_str())
+                .legend(move |(x, y)| Polygon::new(legend_marker(kind, x, y), col.filled()));
+        }
+    }
+    Ok(())
+}
+
+/// The marker's shape in a legend entry at (x, y), pixels.
+fn legend_marker(kind: MarkerKind, x: i32, y: i32) -> Vec<(i32, i32)> {
+    match kind {
+        MarkerKind::TriUp => vec![(x + 3, y + 5), (x + 15, y + 5), (x + 9, y - 6)],
+        MarkerKind::TriDown => vec![(x + 3, y - 5), (x + 15, y - 5), (x + 9, y + 6)],
+        MarkerKind::Circle => (0..12)
+            .map(|k| {
+                let a = std::f64::consts::TAU * f64::from(k) / 12.0;
+                (
+                    x + 9 + (5.0 * a.cos()).round() as i32,
+                    y + (5.0 * a.sin()).round() as i32,
+                )
+            })
+            .collect(),
+    }
+}
 
 /// Finite values' (min, max).
 pub fn min_max(v: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
