@@ -2,7 +2,7 @@
 //! machine), with the re-simulations (the model over the record, the effect over the
 //! held-out span).
 //!
-//! Run: `cargo bench -p paragyro-sim --bench diagnose`.
+//! Run: `cargo bench -p paragyro-diagnose --bench diagnose`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use paragyro_diagnose::diagnose::{Options, diagnose};
@@ -25,7 +25,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("diagnose a 60 s record (re-simulation included)", |b| {
         b.iter(|| {
             let d = diagnose(&rec, &Options::default()).expect("diagnoses");
-            assert_eq!(d.verdict, "nonlinear_damping");
+            assert_eq!(d.report.verdict.to_string(), "nonlinear_damping");
         })
     });
     g.finish();

@@ -3,62 +3,108 @@
 //!
 //! 1. **Draw** N records of the `characterise` scenario from the seed: 20 % clean, 50 % one
 //!    library effect, 15 % two library effects, 15 % one effect outside the library. Sizes
-//!    are log-uniform over [`RANGES`] (which reach below the stated detection limits), signs
-//!    random where the effect has both, the angular-vibration beat uniform in ±[0.5, 5] Hz.
-//!    Every record has a rate table (`rate_ref_dps`) and a die temperature rising by a random
-//!    2–8 K, so neither column gives the label away.
+//!    are log-uniform over [`size_range`] (which reach below the stated detection limits),
+//!    signs random where the effect has both, the angular-vibration beat uniform in
+//!    ±[0.5, 5] Hz. Every record has a rate table (`rate_ref_dps`) and a die temperature
+//!    rising by a random 2–8 K, so neither column gives the label away.
 //! 2. **Seal**: all records are written, then `labels.json`, before the first diagnosis.
-//! 3. **Diagnose** each record from its CSV alone ([`crate::diagnose::diagnose`]).
+//! 3. **Diagnose** each record from its CSV alone ([`crate::diagnose::diagnose`]), in
+//!    parallel.
 //! 4. **Score** (labels read only now): confusion matrix, top-1 accuracy on single library
 //!    effects above their detection limit, `unknown` on out-of-library records, false
 //!    alarms on clean ones, output-error gap closure against the oracle's (the simulator
 //!    re-run with the true effects at their true sizes), detection rate against size.
 
 use std::collections::BTreeMap;
+use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 
-use crate::diagnose::{self, Model, Options};
-use paragyro_simulator::effects::{EffectSpec, LIBRARY, OUT_OF_LIBRARY};
+use crate::diagnose::{self, Answer, Model, Options, Report, to_json_sorted};
+use crate::par;
+use paragyro_simulator::effects::{Effect, EffectSpec, LIBRARY, OUT_OF_LIBRARY};
 use paragyro_simulator::record::{self, RecordOptions};
 use paragyro_simulator::scenario::Scenario;
 
-/// Size range drawn for each effect (log-uniform magnitude) and the stated detection limit
-/// (the size above which the diagnosis is claimed to name it), fixed before the scored run.
-/// (name, low, high, detection limit, signed)
-pub const RANGES: [(&str, f64, f64, f64, bool); 11] = [
-    ("geometric_nonlinearity", 1e-9, 1e-5, 1e-7, true),
-    ("angular_vibration", 1.0, 60.0, 20.0, false),
-    ("electrostatic_softening", 1e-9, 1e-5, 1e-7, false),
-    ("feedthrough", 1e-6, 1e-2, 1e-4, true),
-    ("nonlinear_damping", 1e-9, 1e-5, 1e-7, false),
-    ("anisodamping", 1e-9, 1e-5, 1e-7, true),
-    ("force_leak", 1e-7, 1e-3, 1e-5, true),
-    ("thermal_drift", 0.05, 50.0, 1.0, false),
-    ("lockin_mismatch", 1e-5, 1e-1, 1e-3, true),
-    ("quadratic_stiffness", 1e-7, 1e-4, 1e-6, true),
-    ("readout_gain", 1e-5, 3e-2, 1e-3, true),
-];
+/// The size range drawn for an effect (log-uniform magnitude) and its stated detection
+/// limit (the size above which the diagnosis is claimed to name it), fixed before the
+/// scored run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SizeRange {
+    /// Smallest magnitude drawn.
+    pub low: f64,
+    /// Largest magnitude drawn.
+    pub high: f64,
+    /// The detection limit.
+    pub limit: f64,
+    /// Whether both signs are drawn.
+    pub signed: bool,
+}
 
-fn range(name: &str) -> (f64, f64, f64, bool) {
-    RANGES
-        .iter()
-        .find(|r| r.0 == name)
-        .map_or((1.0, 1.0, 1.0, false), |r| (r.1, r.2, r.3, r.4))
+const fn r(low: f64, high: f64, limit: f64, signed: bool) -> SizeRange {
+    SizeRange {
+        low,
+        high,
+        limit,
+        signed,
+    }
+}
+
+/// The size range of each effect.
+pub const fn size_range(e: Effect) -> SizeRange {
+    match e {
+        Effect::GeometricNonlinearity => r(1e-9, 1e-5, 1e-7, true),
+        Effect::AngularVibration => r(1.0, 60.0, 20.0, false),
+        Effect::ElectrostaticSoftening => r(1e-9, 1e-5, 1e-7, false),
+        Effect::Feedthrough => r(1e-6, 1e-2, 1e-4, true),
+        Effect::NonlinearDamping => r(1e-9, 1e-5, 1e-7, false),
+        Effect::Anisodamping => r(1e-9, 1e-5, 1e-7, true),
+        Effect::ForceLeak => r(1e-7, 1e-3, 1e-5, true),
+        Effect::ThermalDrift => r(0.05, 50.0, 1.0, false),
+        Effect::LockinMismatch => r(1e-5, 1e-1, 1e-3, true),
+        Effect::QuadraticStiffness => r(1e-7, 1e-4, 1e-6, true),
+        Effect::ReadoutGain => r(1e-5, 3e-2, 1e-3, true),
+    }
+}
+
+/// What a drawn record holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Category {
+    /// Nothing added.
+    None,
+    /// One library effect.
+    Single,
+    /// Two library effects.
+    Double,
+    /// One effect outside the library.
+    Outside,
+}
+
+impl fmt::Display for Category {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Category::None => "none",
+            Category::Single => "single",
+            Category::Double => "double",
+            Category::Outside => "outside",
+        })
+    }
 }
 
 /// One drawn record.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Draw {
     /// Record id.
     pub id: String,
-    /// Category: none, single, double, outside.
-    pub category: String,
+    /// What it holds.
+    pub category: Category,
     /// Effects with their true sizes.
     pub effects: Vec<EffectSpec>,
     /// Noise seed.
@@ -67,19 +113,28 @@ pub struct Draw {
     pub temp_rise_k: f64,
 }
 
-fn draw_effect(rng: &mut Xoshiro256PlusPlus, name: &str) -> EffectSpec {
-    let (lo, hi, _, signed) = range(name);
-    let mut size = (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp();
-    if name == "thermal_drift" || (signed && rng.random::<bool>()) {
+/// labels.json.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Labels {
+    /// The seed of the draw.
+    pub seed: u64,
+    /// The records' labels.
+    pub records: Vec<Draw>,
+}
+
+fn draw_effect(rng: &mut Xoshiro256PlusPlus, e: Effect) -> EffectSpec {
+    let r = size_range(e);
+    let mut size = (r.low.ln() + rng.random::<f64>() * (r.high.ln() - r.low.ln())).exp();
+    if e == Effect::ThermalDrift || (r.signed && rng.random::<bool>()) {
         size = -size; // TCF is negative in silicon
     }
-    let param = (name == "angular_vibration").then(|| {
+    let param = e.takes_param().then(|| {
         let b = 0.5 + 4.5 * rng.random::<f64>();
         let b = (b * 100.0).round() / 100.0;
         if rng.random::<bool>() { b } else { -b }
     });
     EffectSpec {
-        name: name.into(),
+        effect: e,
         size,
         param,
     }
@@ -94,10 +149,10 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
             let pick_lib =
                 |rng: &mut Xoshiro256PlusPlus| LIBRARY[rng.random_range(0..LIBRARY.len())];
             let (category, effects) = if u < 0.2 {
-                ("none", Vec::new())
+                (Category::None, Vec::new())
             } else if u < 0.7 {
                 let e = pick_lib(&mut rng);
-                ("single", vec![draw_effect(&mut rng, e)])
+                (Category::Single, vec![draw_effect(&mut rng, e)])
             } else if u < 0.85 {
                 let a = pick_lib(&mut rng);
                 let mut b = pick_lib(&mut rng);
@@ -105,16 +160,16 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
                     b = pick_lib(&mut rng);
                 }
                 (
-                    "double",
+                    Category::Double,
                     vec![draw_effect(&mut rng, a), draw_effect(&mut rng, b)],
                 )
             } else {
                 let e = OUT_OF_LIBRARY[rng.random_range(0..OUT_OF_LIBRARY.len())];
-                ("outside", vec![draw_effect(&mut rng, e)])
+                (Category::Outside, vec![draw_effect(&mut rng, e)])
             };
             Draw {
                 id: format!("rec-{i:03}"),
-                category: category.into(),
+                category,
                 effects,
                 seed: rng.random::<u32>() as u64,
                 temp_rise_k: ((2.0 + 6.0 * rng.random::<f64>()) * 100.0).round() / 100.0,
@@ -123,74 +178,73 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
         .collect()
 }
 
-/// One scored record.
-#[derive(Clone, Debug, serde::Serialize)]
-struct Scored {
-    id: String,
-    category: String,
-    truth: Vec<String>,
-    sizes: Vec<f64>,
-    verdict: String,
-    secondary: Option<String>,
-    correct: bool,
-    above_limit: bool,
-    size_over_limit: f64,
-    oe_closure: Option<f64>,
-    oracle_closure: Option<f64>,
-    fitted_size: Option<f64>,
-    seconds: f64,
+/// One scored record (score.json's `records`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Scored {
+    /// Record id.
+    pub id: String,
+    /// What it holds.
+    pub category: Category,
+    /// The true effects.
+    pub truth: Vec<Effect>,
+    /// Their sizes.
+    pub sizes: Vec<f64>,
+    /// The diagnosis's answer.
+    pub verdict: Answer,
+    /// Its second effect, if any.
+    pub secondary: Option<Effect>,
+    /// Whether the answer is right for the category.
+    pub correct: bool,
+    /// Whether the largest effect is above its detection limit.
+    pub above_limit: bool,
+    /// The largest |size| / detection limit.
+    pub size_over_limit: f64,
+    /// The diagnosis's output-error closure.
+    pub oe_closure: Option<f64>,
+    /// The oracle's (true effects at their true sizes).
+    pub oracle_closure: Option<f64>,
+    /// The verdict's fitted size.
+    pub fitted_size: Option<f64>,
+    /// Wall time of the diagnosis, s.
+    pub seconds: f64,
 }
 
 /// Runs the benchmark into `dir` (records/, labels.json, diagnoses/, score.json, score.md).
-/// `progress` gets messages.
+/// `progress` gets messages (from the worker threads).
 pub fn run(
     n: usize,
     seed: u64,
     dir: &Path,
-    progress: &mut dyn FnMut(&str),
-) -> anyhow::Result<Value> {
+    progress: &(dyn Fn(&str) + Sync),
+) -> anyhow::Result<Summary> {
     let sc = Scenario::load("characterise").map_err(anyhow::Error::new)?;
     let draws = draw(n, seed);
     let rec_dir = dir.join("records");
     std::fs::create_dir_all(&rec_dir)
         .with_context(|| format!("cannot create {}", rec_dir.display()))?;
 
-    // 1. records (two at a time), 2. the sealed labels
+    // 1. records, 2. the sealed labels
     let t0 = Instant::now();
     let paths: Vec<PathBuf> = draws
         .iter()
         .map(|d| rec_dir.join(format!("{}.csv", d.id)))
         .collect();
-    let results: Vec<anyhow::Result<()>> = std::thread::scope(|s| {
-        let chunks: Vec<Vec<usize>> = (0..2).map(|c| (c..n).step_by(2).collect()).collect();
-        let hs: Vec<_> = chunks
-            .into_iter()
-            .map(|ix| {
-                let (sc, draws, paths) = (&sc, &draws, &paths);
-                s.spawn(move || {
-                    ix.into_iter()
-                        .map(|i| {
-                            let d = &draws[i];
-                            let opts = RecordOptions {
-                                seed: Some(d.seed),
-                                effects: d.effects.clone(),
-                                rate_table: true,
-                                temp: Some((25.0, d.temp_rise_k)),
-                            };
-                            record::write_simulated_record(sc, &paths[i], &opts, &mut |_| {})
-                                .map(|_| ())
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        hs.into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
-            .collect()
-    });
-    for r in results {
-        r?;
-    }
+    let jobs: Vec<(&Draw, &PathBuf)> = draws.iter().zip(&paths).collect();
+    par::try_map(
+        &jobs,
+        |(d, _)| format!("recording {}", d.id),
+        |(d, p)| {
+            let opts = RecordOptions {
+                seed: Some(d.seed),
+                effects: d.effects.clone(),
+                rate_table: true,
+                temp: Some((25.0, d.temp_rise_k)),
+            };
+            record::write_simulated_record(&sc, p, &opts, &mut |_| {})
+                .with_context(|| format!("recording {}", d.id))
+                .map(|_| ())
+        },
+    )?;
     progress(&format!(
         "wrote {n} records in {:.0} s",
         t0.elapsed().as_secs_f64()
@@ -198,93 +252,131 @@ pub fn run(
     let labels = dir.join("labels.json");
     std::fs::write(
         &labels,
-        serde_json::to_string_pretty(&json!({"seed": seed, "records": draws}))? + "\n",
+        to_json_sorted(&Labels {
+            seed,
+            records: draws.clone(),
+        })?,
     )
     .with_context(|| format!("cannot write {}", labels.display()))?;
     progress(&format!("sealed the labels in {}", labels.display()));
 
     // 3. diagnoses, from the CSV alone
-    let diag_dir = dir.join("diagnoses");
-    let mut reports: Vec<Value> = Vec::with_capacity(n);
-    for (i, p) in paths.iter().enumerate() {
-        let rec = record::read_record(p).map_err(anyhow::Error::new)?;
-        let d = diagnose::diagnose(&rec, &Options::default())
-            .with_context(|| format!("diagnosing {}", p.display()))?;
-        let out = diag_dir.join(&draws[i].id);
-        std::fs::create_dir_all(&out)?;
-        std::fs::write(
-            out.join("report.json"),
-            serde_json::to_string_pretty(&d.json)? + "\n",
-        )?;
-        progress(&format!("[{}/{n}] {} → {}", i + 1, draws[i].id, d.verdict));
-        reports.push(d.json);
-    }
+    let reports = diagnose_all(&paths, &draws, &dir.join("diagnoses"), progress)?;
 
     // 4. score (labels used from here on)
-    let mut scored = Vec::with_capacity(n);
-    for (i, d) in draws.iter().enumerate() {
-        let r = &reports[i];
-        let verdict = r["verdict"].as_str().unwrap_or("").to_string();
-        let secondary = r["secondary"]["effect"].as_str().map(String::from);
-        let truth: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();
-        let correct = match d.category.as_str() {
-            "none" => verdict == "none",
-            "outside" => verdict == "unknown",
-            _ => truth.contains(&verdict),
-        };
-        let ratio = d
-            .effects
-            .iter()
-            .map(|e| e.size.abs() / range(&e.name).2)
-            .fold(0.0f64, f64::max);
-        let oe_closure = r["output_error"]["closure"].as_f64();
-        // the oracle: the simulator with the true effects at their true sizes, same span
-        let oracle_closure = if d.category == "single" || d.category == "double" {
-            let rec = record::read_record(&paths[i]).map_err(anyhow::Error::new)?;
-            oracle(&rec, r, &d.effects).ok()
-        } else {
-            None
-        };
-        let fitted_size = r["ranking"]
-            .as_array()
-            .and_then(|a| a.iter().find(|c| c["effect"] == json!(verdict)))
-            .and_then(|c| c["size"].as_f64());
-        scored.push(Scored {
-            id: d.id.clone(),
-            category: d.category.clone(),
-            truth,
-            sizes: d.effects.iter().map(|e| e.size).collect(),
-            verdict,
-            secondary,
-            correct,
-            above_limit: ratio >= 1.0,
-            size_over_limit: ratio,
-            oe_closure,
-            oracle_closure,
-            fitted_size,
-            seconds: r["seconds"].as_f64().unwrap_or(f64::NAN),
-        });
-    }
+    let ix: Vec<usize> = (0..n).collect();
+    let scored = par::try_map(
+        &ix,
+        |&i| format!("scoring {}", draws[i].id),
+        |&i| score(&draws[i], &paths[i], &reports[i]),
+    )?;
     let summary = summarize(&scored, n, seed);
     std::fs::write(
         dir.join("score.json"),
-        serde_json::to_string_pretty(&json!({"summary": summary, "records": scored}))? + "\n",
+        to_json_sorted(&Score {
+            summary: &summary,
+            records: &scored,
+        })?,
     )?;
     std::fs::write(dir.join("score.md"), markdown(&summary, &scored))?;
     Ok(summary)
 }
 
+/// Diagnoses every record (in parallel, at most as many at once as there are threads, so
+/// the memory stays bounded), writes each report.json, and returns the reports in order.
+fn diagnose_all(
+    paths: &[PathBuf],
+    draws: &[Draw],
+    diag_dir: &Path,
+    progress: &(dyn Fn(&str) + Sync),
+) -> anyhow::Result<Vec<Report>> {
+    let n = paths.len();
+    let done = AtomicUsize::new(0);
+    let items: Vec<(usize, &PathBuf)> = paths.iter().enumerate().collect();
+    let mut reports = Vec::with_capacity(n);
+    for chunk in items.chunks(rayon::current_num_threads().max(1)) {
+        reports.extend(par::try_map(
+            chunk,
+            |(_, p)| format!("diagnosing {}", p.display()),
+            |&(i, p)| {
+                let rec = record::read_record(p).map_err(anyhow::Error::new)?;
+                let d = diagnose::diagnose(&rec, &Options::default())
+                    .with_context(|| format!("diagnosing {}", p.display()))?;
+                let out = diag_dir.join(&draws[i].id);
+                std::fs::create_dir_all(&out)
+                    .with_context(|| format!("cannot create {}", out.display()))?;
+                std::fs::write(out.join("report.json"), to_json_sorted(&d.report)?)?;
+                let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+                progress(&format!("[{k}/{n}] {} → {}", draws[i].id, d.report.verdict));
+                Ok(d.report)
+            },
+        )?);
+    }
+    Ok(reports)
+}
+
+/// A record's score against its label.
+fn score(d: &Draw, path: &Path, r: &Report) -> anyhow::Result<Scored> {
+    let verdict = r.verdict.answer();
+    let truth: Vec<Effect> = d.effects.iter().map(|e| e.effect).collect();
+    let correct = match d.category {
+        Category::None => verdict == Answer::None,
+        Category::Outside => verdict == Answer::Unknown,
+        Category::Single | Category::Double => {
+            matches!(verdict, Answer::Effect(e) if truth.contains(&e))
+        }
+    };
+    let ratio = d
+        .effects
+        .iter()
+        .map(|e| e.size.abs() / size_range(e.effect).limit)
+        .fold(0.0f64, f64::max);
+    // the oracle: the simulator with the true effects at their true sizes, same span
+    let oracle_closure = match d.category {
+        Category::Single | Category::Double => {
+            let rec = record::read_record(path).map_err(anyhow::Error::new)?;
+            oracle(&rec, r, &d.effects).ok()
+        }
+        Category::None | Category::Outside => None,
+    };
+    let fitted_size = match verdict {
+        Answer::Effect(e) => r
+            .ranking
+            .iter()
+            .find(|c| c.effect == e)
+            .and_then(|c| c.size),
+        Answer::None | Answer::Unknown => None,
+    };
+    Ok(Scored {
+        id: d.id.clone(),
+        category: d.category,
+        sizes: d.effects.iter().map(|e| e.size).collect(),
+        verdict,
+        secondary: r.verdict.secondary().map(|s| s.effect),
+        correct,
+        above_limit: ratio >= 1.0,
+        size_over_limit: ratio,
+        oe_closure: r
+            .output_error
+            .as_ref()
+            .map(|o| o.closure)
+            .filter(|v| v.is_finite()),
+        oracle_closure,
+        fitted_size: fitted_size.filter(|v| v.is_finite()),
+        seconds: r.seconds,
+        truth,
+    })
+}
+
 /// Output-error closure of the true effects at their true sizes on the diagnosis's
 /// held-out span (the same re-simulation and error measure as the diagnosis).
-fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyhow::Result<f64> {
-    let before = report["output_error"]["before"]["above_noise"]
-        .as_f64()
+fn oracle(rec: &record::Record, report: &Report, effects: &[EffectSpec]) -> anyhow::Result<f64> {
+    let oe = report
+        .output_error
+        .as_ref()
         .context("no output error in the report")?;
-    let span = &report["spans_s"]["held_out"];
-    let (t0, t1) = (
-        span[0].as_f64().unwrap_or(0.0),
-        span[1].as_f64().unwrap_or(0.0),
-    );
+    let before = oe.before.above_noise;
+    let [t0, t1] = report.spans_s.held_out;
     let k0 = rec
         .rows
         .iter()
@@ -312,11 +404,91 @@ fn oracle(rec: &record::Record, report: &Value, effects: &[EffectSpec]) -> anyho
     .run(k0..k1)?;
     let mut full = vec![paragyro_simulator::lockin::LockinOut::default(); rec.rows.len()];
     full[k0..k1].clone_from_slice(&sim);
-    let ratio = report["output_error"]["noise_diff_ratio"]
-        .as_f64()
-        .context("no noise ratio")?;
-    let e = diagnose::output_error(rec, &full, k0..k1, ratio);
+    let e = diagnose::output_error(rec, &full, k0..k1, oe.noise_diff_ratio);
     Ok(1.0 - e.above_noise / before.max(1e-300))
+}
+
+/// score.json.
+#[derive(Serialize)]
+struct Score<'a> {
+    summary: &'a Summary,
+    records: &'a [Scored],
+}
+
+/// The upper end of a size bin: a number or "inf".
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Bound {
+    /// A finite bound.
+    Finite(f64),
+    /// No bound ("inf").
+    Named(&'static str),
+}
+
+/// Detection against size: single library effects whose size over the detection limit is
+/// in a bin.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DetectionBin {
+    /// The bin [low, high) of size / detection limit.
+    pub size_over_limit: (f64, Bound),
+    /// Records in it.
+    pub records: usize,
+    /// Share named correctly.
+    pub named_correctly: Option<f64>,
+    /// Share answered `none`.
+    pub said_none: Option<f64>,
+}
+
+/// An effect's drawn range and detection limit (score.json's `limits`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Limit {
+    pub effect: Effect,
+    pub low: f64,
+    pub high: f64,
+    pub detection_limit: f64,
+}
+
+/// The thresholds of the diagnosis that scored.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BlindThresholds {
+    pub t_sig: f64,
+    pub gap_min: f64,
+    pub share_min: f64,
+}
+
+/// The scores (score.json's `summary`); shares are `None` when they have no record.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Summary {
+    pub n: usize,
+    pub seed: u64,
+    /// Top-1 on single library effects above their detection limit.
+    pub top1_single_above_limit: Option<f64>,
+    pub single_above_limit_records: usize,
+    /// `unknown` on out-of-library records.
+    pub unknown_on_outside: Option<f64>,
+    pub unknown_on_outside_above_limit: Option<f64>,
+    pub outside_above_limit_records: usize,
+    /// Top-1 on single library effects, all sizes.
+    pub top1_single_all_sizes: Option<f64>,
+    /// A library effect named on an out-of-library record.
+    pub false_attribution_on_outside: Option<f64>,
+    pub outside_records: usize,
+    /// Anything but `none` on a clean record.
+    pub false_alarms_on_clean: Option<f64>,
+    pub clean_records: usize,
+    pub double_one_named: Option<f64>,
+    pub double_both_named: Option<f64>,
+    pub double_records: usize,
+    /// Median output-error closure over the oracle's (single, above the limit).
+    pub median_closure_over_oracle: Option<f64>,
+    pub median_oe_closure_single_above: Option<f64>,
+    pub median_oracle_closure_single_above: Option<f64>,
+    /// Truth (first effect, `none`, `outside:…`, `two effects`) → verdict → count.
+    pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
+    pub detection_vs_size: Vec<DetectionBin>,
+    pub median_diagnosis_seconds: Option<f64>,
+    pub limits: Vec<Limit>,
+    pub thresholds: BlindThresholds,
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -328,160 +500,204 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     Some(v[v.len() / 2])
 }
 
-fn summarize(s: &[Scored], n: usize, seed: u64) -> Value {
-    let frac = |num: usize, den: usize| {
-        if den > 0 {
-            num as f64 / den as f64
-        } else {
-            f64::NAN
-        }
-    };
-    let single_above: Vec<&Scored> = s
+/// `num / den`, `None` without records.
+fn frac(num: usize, den: usize) -> Option<f64> {
+    (den > 0).then(|| num as f64 / den as f64)
+}
+
+fn summarize(s: &[Scored], n: usize, seed: u64) -> Summary {
+    let of = |c: Category| -> Vec<&Scored> { s.iter().filter(|r| r.category == c).collect() };
+    let (single, outside, clean, double) = (
+        of(Category::Single),
+        of(Category::Outside),
+        of(Category::None),
+        of(Category::Double),
+    );
+    let single_above: Vec<&Scored> = single.iter().copied().filter(|r| r.above_limit).collect();
+    let count = |v: &[&Scored], f: &dyn Fn(&Scored) -> bool| v.iter().filter(|r| f(r)).count();
+    let named = |r: &Scored| matches!(r.verdict, Answer::Effect(_));
+    let ratios: Vec<f64> = single_above
         .iter()
-        .filter(|r| r.category == "single" && r.above_limit)
-        .collect();
-    let outside: Vec<&Scored> = s.iter().filter(|r| r.category == "outside").collect();
-    let clean: Vec<&Scored> = s.iter().filter(|r| r.category == "none").collect();
-    let double: Vec<&Scored> = s.iter().filter(|r| r.category == "double").collect();
-    let false_attr = outside
-        .iter()
-        .filter(|r| r.verdict != "unknown" && r.verdict != "none")
-        .count();
-    let ratios: Vec<f64> = s
-        .iter()
-        .filter(|r| r.category == "single" && r.above_limit)
         .filter_map(|r| match (r.oe_closure, r.oracle_closure) {
             (Some(a), Some(o)) if o > 0.0 => Some(a / o),
             _ => None,
         })
         .collect();
-    // confusion: truth (first effect / none / outside) → verdict
+    let outside_above: Vec<&Scored> = outside.iter().copied().filter(|r| r.above_limit).collect();
+    Summary {
+        n,
+        seed,
+        top1_single_above_limit: frac(count(&single_above, &|r| r.correct), single_above.len()),
+        single_above_limit_records: single_above.len(),
+        unknown_on_outside: frac(
+            count(&outside, &|r| r.verdict == Answer::Unknown),
+            outside.len(),
+        ),
+        unknown_on_outside_above_limit: frac(
+            count(&outside_above, &|r| r.verdict == Answer::Unknown),
+            outside_above.len(),
+        ),
+        outside_above_limit_records: outside_above.len(),
+        top1_single_all_sizes: frac(count(&single, &|r| r.correct), single.len()),
+        false_attribution_on_outside: frac(count(&outside, &named), outside.len()),
+        outside_records: outside.len(),
+        false_alarms_on_clean: frac(count(&clean, &|r| r.verdict != Answer::None), clean.len()),
+        clean_records: clean.len(),
+        double_one_named: frac(count(&double, &|r| r.correct), double.len()),
+        double_both_named: frac(
+            count(&double, &|r| {
+                r.correct && r.secondary.is_some_and(|x| r.truth.contains(&x))
+            }),
+            double.len(),
+        ),
+        double_records: double.len(),
+        median_closure_over_oracle: median(ratios),
+        median_oe_closure_single_above: median(
+            single_above.iter().filter_map(|r| r.oe_closure).collect(),
+        ),
+        median_oracle_closure_single_above: median(
+            single_above
+                .iter()
+                .filter_map(|r| r.oracle_closure)
+                .collect(),
+        ),
+        confusion: confusion(s),
+        detection_vs_size: detection_vs_size(&single),
+        median_diagnosis_seconds: median(s.iter().map(|r| r.seconds).collect()),
+        limits: Effect::ALL
+            .iter()
+            .map(|&e| {
+                let r = size_range(e);
+                Limit {
+                    effect: e,
+                    low: r.low,
+                    high: r.high,
+                    detection_limit: r.limit,
+                }
+            })
+            .collect(),
+        thresholds: BlindThresholds {
+            t_sig: diagnose::T_SIG,
+            gap_min: diagnose::GAP_MIN,
+            share_min: diagnose::SHARE_MIN,
+        },
+    }
+}
+
+/// Truth (first effect / none / outside / two effects) → verdict → count.
+fn confusion(s: &[Scored]) -> BTreeMap<String, BTreeMap<String, usize>> {
     let mut conf: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
     for r in s {
-        let t = match r.category.as_str() {
-            "none" => "none".to_string(),
-            "outside" => format!("outside:{}", r.truth[0]),
-            "double" => "two effects".to_string(),
-            _ => r.truth[0].clone(),
+        let first = r.truth.first().map_or("?", |e| e.name());
+        let t = match r.category {
+            Category::None => "none".to_string(),
+            Category::Outside => format!("outside:{first}"),
+            Category::Double => "two effects".to_string(),
+            Category::Single => first.to_string(),
         };
         *conf
             .entry(t)
             .or_default()
-            .entry(r.verdict.clone())
+            .entry(r.verdict.to_string())
             .or_default() += 1;
     }
-    // detection rate against size (single library effects), by size / limit
-    let bins = [(0.0, 0.3), (0.3, 1.0), (1.0, 10.0), (10.0, f64::INFINITY)];
-    let det: Vec<Value> = bins
-        .iter()
-        .map(|&(a, b)| {
-            let v: Vec<&Scored> = s
-                .iter()
-                .filter(|r| r.category == "single" && r.size_over_limit >= a && r.size_over_limit < b)
-                .collect();
-            json!({"size_over_limit": [a, if b.is_finite() { json!(b) } else { json!("inf") }], "records": v.len(),
-                   "named_correctly": frac(v.iter().filter(|r| r.correct).count(), v.len()),
-                   "said_none": frac(v.iter().filter(|r| r.verdict == "none").count(), v.len())})
-        })
-        .collect();
-    json!({
-        "n": n,
-        "seed": seed,
-        "top1_single_above_limit": frac(single_above.iter().filter(|r| r.correct).count(), single_above.len()),
-        "single_above_limit_records": single_above.len(),
-        "unknown_on_outside": frac(outside.iter().filter(|r| r.verdict == "unknown").count(), outside.len()),
-        "unknown_on_outside_above_limit": frac(
-            outside.iter().filter(|r| r.above_limit && r.verdict == "unknown").count(),
-            outside.iter().filter(|r| r.above_limit).count()
-        ),
-        "outside_above_limit_records": outside.iter().filter(|r| r.above_limit).count(),
-        "top1_single_all_sizes": frac(
-            s.iter().filter(|r| r.category == "single" && r.correct).count(),
-            s.iter().filter(|r| r.category == "single").count()
-        ),
-        "false_attribution_on_outside": frac(false_attr, outside.len()),
-        "outside_records": outside.len(),
-        "false_alarms_on_clean": frac(clean.iter().filter(|r| r.verdict != "none").count(), clean.len()),
-        "clean_records": clean.len(),
-        "double_one_named": frac(double.iter().filter(|r| r.correct).count(), double.len()),
-        "double_both_named": frac(double.iter().filter(|r| r.correct && r.secondary.as_ref().is_some_and(|x| r.truth.contains(x))).count(), double.len()),
-        "double_records": double.len(),
-        "median_closure_over_oracle": median(ratios.clone()),
-        "median_oe_closure_single_above": median(single_above.iter().filter_map(|r| r.oe_closure).collect()),
-        "median_oracle_closure_single_above": median(single_above.iter().filter_map(|r| r.oracle_closure).collect()),
-        "confusion": conf,
-        "detection_vs_size": det,
-        "median_diagnosis_seconds": median(s.iter().map(|r| r.seconds).collect()),
-        "limits": RANGES.iter().map(|r| json!({"effect": r.0, "low": r.1, "high": r.2, "detection_limit": r.3})).collect::<Vec<_>>(),
-        "thresholds": {"t_sig": diagnose::T_SIG, "gap_min": diagnose::GAP_MIN, "share_min": diagnose::SHARE_MIN},
-    })
+    conf
 }
 
-fn markdown(sm: &Value, s: &[Scored]) -> String {
-    let p = |v: &Value| {
-        v.as_f64()
-            .map_or("–".into(), |x| format!("{:.0} %", 100.0 * x))
-    };
+/// Detection rate against size (single library effects), by size / limit.
+fn detection_vs_size(single: &[&Scored]) -> Vec<DetectionBin> {
+    let bins = [(0.0, 0.3), (0.3, 1.0), (1.0, 10.0), (10.0, f64::INFINITY)];
+    bins.iter()
+        .map(|&(a, b)| {
+            let v: Vec<&&Scored> = single
+                .iter()
+                .filter(|r| r.size_over_limit >= a && r.size_over_limit < b)
+                .collect();
+            DetectionBin {
+                size_over_limit: (
+                    a,
+                    if b.is_finite() {
+                        Bound::Finite(b)
+                    } else {
+                        Bound::Named("inf")
+                    },
+                ),
+                records: v.len(),
+                named_correctly: frac(v.iter().filter(|r| r.correct).count(), v.len()),
+                said_none: frac(
+                    v.iter().filter(|r| r.verdict == Answer::None).count(),
+                    v.len(),
+                ),
+            }
+        })
+        .collect()
+}
+
+/// A share as "N %" ("–" without records).
+fn pct(v: Option<f64>) -> String {
+    v.map_or("–".into(), |x| format!("{:.0} %", 100.0 * x))
+}
+
+/// A value as JSON text (how score.md has always printed the bins' bounds).
+fn json_text<T: Serialize>(v: &T) -> String {
+    serde_json::to_string(v).unwrap_or_default()
+}
+
+fn markdown(sm: &Summary, s: &[Scored]) -> String {
     let mut m = format!(
         "# Blind benchmark of the diagnosis (N = {}, seed {})\n\n| measure | result | target |\n|---|---|---|\n",
-        sm["n"], sm["seed"]
+        sm.n, sm.seed
     );
-    m.push_str(&format!("| top-1 on single library effects above the detection limit ({} records) | {} | ≥ 90 % |\n", sm["single_above_limit_records"], p(&sm["top1_single_above_limit"])));
+    m.push_str(&format!("| top-1 on single library effects above the detection limit ({} records) | {} | ≥ 90 % |\n", sm.single_above_limit_records, pct(sm.top1_single_above_limit)));
     m.push_str(&format!(
         "| `unknown` on out-of-library records ({}) | {} | ≥ 80 % |\n",
-        sm["outside_records"],
-        p(&sm["unknown_on_outside"])
+        sm.outside_records,
+        pct(sm.unknown_on_outside)
     ));
     m.push_str(&format!(
         "| `unknown` on out-of-library records above their detection limit ({}) | {} | |\n",
-        sm["outside_above_limit_records"],
-        p(&sm["unknown_on_outside_above_limit"])
+        sm.outside_above_limit_records,
+        pct(sm.unknown_on_outside_above_limit)
     ));
     m.push_str(&format!(
         "| false attribution on out-of-library records | {} | |\n",
-        p(&sm["false_attribution_on_outside"])
+        pct(sm.false_attribution_on_outside)
     ));
     m.push_str(&format!(
         "| top-1 on single library effects, all sizes (`none` below the limit counts as a miss) | {} | |\n",
-        p(&sm["top1_single_all_sizes"])
+        pct(sm.top1_single_all_sizes)
     ));
     m.push_str(&format!(
         "| false alarms on clean records ({}) | {} | ≤ 10 % |\n",
-        sm["clean_records"],
-        p(&sm["false_alarms_on_clean"])
+        sm.clean_records,
+        pct(sm.false_alarms_on_clean)
     ));
-    m.push_str(&format!("| median output-error gap closure / oracle closure (single, above limit) | {} | ≥ 80 % |\n", p(&sm["median_closure_over_oracle"])));
+    m.push_str(&format!("| median output-error gap closure / oracle closure (single, above limit) | {} | ≥ 80 % |\n", pct(sm.median_closure_over_oracle)));
     m.push_str(&format!(
         "| two effects: one named / both named ({}) | {} / {} | |\n",
-        sm["double_records"],
-        p(&sm["double_one_named"]),
-        p(&sm["double_both_named"])
+        sm.double_records,
+        pct(sm.double_one_named),
+        pct(sm.double_both_named)
     ));
     m.push_str(&format!(
         "| median diagnosis time (20 s record) | {:.2} s | |\n",
-        sm["median_diagnosis_seconds"].as_f64().unwrap_or(f64::NAN)
+        sm.median_diagnosis_seconds.unwrap_or(f64::NAN)
     ));
     m.push_str("\n## Detection against size (single library effects)\n\n| size / detection limit | records | named correctly | said none |\n|---|---|---|---|\n");
-    if let Some(a) = sm["detection_vs_size"].as_array() {
-        for b in a {
-            m.push_str(&format!(
-                "| {}–{} | {} | {} | {} |\n",
-                b["size_over_limit"][0],
-                b["size_over_limit"][1],
-                b["records"],
-                p(&b["named_correctly"]),
-                p(&b["said_none"])
-            ));
-        }
+    for b in &sm.detection_vs_size {
+        m.push_str(&format!(
+            "| {}–{} | {} | {} | {} |\n",
+            json_text(&b.size_over_limit.0),
+            json_text(&b.size_over_limit.1),
+            b.records,
+            pct(b.named_correctly),
+            pct(b.said_none)
+        ));
     }
     m.push_str("\n## Confusion (truth → verdict)\n\n");
-    if let Some(c) = sm["confusion"].as_object() {
-        for (t, v) in c {
-            let cells: Vec<String> = v.as_object().map_or(Vec::new(), |o| {
-                o.iter().map(|(k, n)| format!("{k}: {n}")).collect()
-            });
-            m.push_str(&format!("- **{t}** → {}\n", cells.join(", ")));
-        }
+    for (t, v) in &sm.confusion {
+        let cells: Vec<String> = v.iter().map(|(k, n)| format!("{k}: {n}")).collect();
+        m.push_str(&format!("- **{t}** → {}\n", cells.join(", ")));
     }
     m.push_str("\n## Records\n\n| id | category | truth (size) | verdict | OE closure | oracle |\n|---|---|---|---|---|---|\n");
     for r in s {
@@ -498,10 +714,7 @@ fn markdown(sm: &Value, s: &[Scored]) -> String {
             r.category,
             truth.join(", "),
             r.verdict,
-            r.secondary
-                .as_ref()
-                .map(|x| format!(" + {x}"))
-                .unwrap_or_default(),
+            r.secondary.map(|x| format!(" + {x}")).unwrap_or_default(),
             f(r.oe_closure),
             f(r.oracle_closure)
         ));

@@ -43,7 +43,7 @@ pub fn plots(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         .iter()
         .map(|(e, gc, sig)| {
             (
-                e.clone(),
+                e.to_string(),
                 gc.max(-0.2),
                 if *sig { TAB10[2] } else { TAB10[7] },
             )
@@ -53,7 +53,7 @@ pub fn plots(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>> {
         &p,
         &format!(
             "which effect: held-out gap closure (green: significant) — verdict {}",
-            d.verdict
+            d.report.verdict
         ),
         "gap closure (held-out)",
         &rank,

@@ -7,3 +7,4 @@
 pub mod blind;
 pub mod diagnose;
 pub mod diagplot;
+pub mod par;

@@ -2,12 +2,12 @@
 //! scenario (20 s, rate table, die temperature +4 K), diagnosed from the record alone.
 //! Seeds and sizes are fixed here; they are not the blind benchmark's.
 
-use paragyro_diagnose::diagnose::{Options, diagnose};
-use paragyro_simulator::effects::EffectSpec;
+use paragyro_diagnose::diagnose::{Candidate, Options, Report, diagnose};
+use paragyro_simulator::effects::{Effect, EffectSpec};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 
-fn diagnosed(effects: &[&str], seed: u64) -> (String, serde_json::Value) {
+fn diagnosed(effects: &[&str], seed: u64) -> (String, Report) {
     let sc = Scenario::load("characterise").unwrap();
     let opts = RecordOptions {
         seed: Some(seed),
@@ -20,20 +20,20 @@ fn diagnosed(effects: &[&str], seed: u64) -> (String, serde_json::Value) {
     };
     let (rec, _truth) = simulate_record_with(&sc, &opts, &mut |_| {}).unwrap();
     let d = diagnose(&rec, &Options::default()).unwrap();
-    (d.verdict, d.json)
+    // report.json round-trips through serde
+    let v = serde_json::to_value(&d.report).unwrap();
+    assert_eq!(serde_json::from_value::<Report>(v).unwrap(), d.report);
+    (d.report.verdict.to_string(), d.report)
 }
 
-fn size_of(j: &serde_json::Value, effect: &str) -> (f64, f64) {
-    let c = j["ranking"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["effect"] == effect)
-        .unwrap();
-    (
-        c["size"].as_f64().unwrap(),
-        c["size_sigma"].as_f64().unwrap(),
-    )
+fn candidate<'a>(j: &'a Report, effect: &str) -> &'a Candidate {
+    let e: Effect = effect.parse().unwrap();
+    j.ranking.iter().find(|c| c.effect == e).unwrap()
+}
+
+fn size_of(j: &Report, effect: &str) -> (f64, f64) {
+    let c = candidate(j, effect);
+    (c.size.unwrap(), c.size_sigma.unwrap())
 }
 
 /// The verdict, the fitted size within 5 % (and 5σ) of the truth, and a held-out output
@@ -42,24 +42,24 @@ fn check(effect: &str, size: f64, seed: u64) {
     let spec = format!("{effect}={size}");
     let (v, j) = diagnosed(&[&spec], seed);
     let (fit, sig) = size_of(&j, effect);
-    let oe = j["output_error"]["closure"].as_f64().unwrap();
+    let oe = j.output_error.as_ref().unwrap().closure;
     println!("{spec}: verdict {v}, fitted {fit:.4e} ± {sig:.1e}, OE closure {oe:.3}");
-    assert_eq!(v, effect, "{}", j["ranking"]);
+    assert_eq!(v, effect, "{:?}", j.ranking);
     assert!(
         (fit - size).abs() <= 0.05 * size.abs(),
         "fitted {fit} vs true {size}"
     );
     assert!(oe > 0.5, "output-error closure {oe}");
-    assert!(j["gap_closure"].as_f64().unwrap() > 0.8);
+    assert!(j.gap_closure > 0.8);
 }
 
 #[test]
 fn clean_record_has_no_gap() {
     let (v, j) = diagnosed(&[], 11);
-    assert_eq!(v, "none", "{}", j["ranking"]);
+    assert_eq!(v, "none", "{:?}", j.ranking);
     // a clean record still has a small systematic residual (2.9 % of the held-out
     // energy on this seed, 0.5–3.2 % on the development records): under the 5 % gate
-    let g = j["gap_fraction_of_baseline"].as_f64().unwrap();
+    let g = j.gap_fraction_of_baseline;
     assert!(g < paragyro_diagnose::diagnose::GAP_MIN, "{g}");
 }
 
@@ -86,11 +86,11 @@ fn force_leak() {
 #[test]
 fn feedthrough_is_found_where_it_lives() {
     let (v, j) = diagnosed(&["feedthrough=3e-3"], 16);
-    assert_eq!(v, "feedthrough", "{}", j["ranking"]);
+    assert_eq!(v, "feedthrough", "{:?}", j.ranking);
     let (fit, _) = size_of(&j, "feedthrough");
     assert!((fit - 3e-3).abs() < 0.1 * 3e-3, "{fit}");
     // the feedthrough is a DC offset of the sense pick-off: the gap lives on the sense DC row
-    let dc = j["where"]["channel"]["sense/DC"].as_f64().unwrap();
+    let dc = j.location.channel["sense/DC"];
     assert!(dc > 0.5, "sense DC share {dc}");
 }
 
@@ -100,24 +100,19 @@ fn feedthrough_is_found_where_it_lives() {
 #[test]
 fn angular_vibration_beat_is_found() {
     let (v, j) = diagnosed(&["angular_vibration=30@2.3"], 17);
-    assert_eq!(v, "angular_vibration", "{}", j["ranking"]);
-    let c = j["ranking"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["effect"] == "angular_vibration")
-        .unwrap();
-    let beat = c["beat_hz"].as_f64().unwrap();
+    assert_eq!(v, "angular_vibration", "{:?}", j.ranking);
+    let c = candidate(&j, "angular_vibration");
+    let beat = c.beat_hz.unwrap();
     assert!((beat - 2.3).abs() < 0.05, "beat {beat}");
-    let size = c["size"].as_f64().unwrap();
+    let size = c.size.unwrap();
     assert!((size - 30.0).abs() < 3.0, "{size}");
 }
 
 #[test]
 fn out_of_library_is_unknown() {
     let (v, j) = diagnosed(&["readout_gain=3e-3"], 18);
-    assert_eq!(v, "unknown", "{}", j["ranking"]);
-    assert!(j["unexplained_above_noise"].as_f64().unwrap() > 0.05);
+    assert_eq!(v, "unknown", "{:?}", j.ranking);
+    assert!(j.unexplained_above_noise > 0.05);
 }
 
 /// A quadratic stiffness (outside the library) on the statically deflected mass looks, to
@@ -126,13 +121,11 @@ fn out_of_library_is_unknown() {
 #[test]
 fn quadratic_stiffness_is_unknown_by_its_drive_rows() {
     let (v, j) = diagnosed(&["quadratic_stiffness=-3e-6"], 103);
-    assert_eq!(v, "unknown", "{}", j["ranking"]);
-    assert_eq!(j["closest_library_effect"], "electrostatic_softening");
-    let rows: Vec<&str> = j["unexplained_rows"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|r| r.as_str())
-        .collect();
+    assert_eq!(v, "unknown", "{:?}", j.ranking);
+    assert_eq!(
+        j.closest_library_effect.to_string(),
+        "electrostatic_softening"
+    );
+    let rows: Vec<&str> = j.unexplained_rows.iter().map(String::as_str).collect();
     assert!(rows.contains(&"drive/DC"), "{rows:?}");
 }

@@ -141,3 +141,43 @@ fn angular_vibration_beats_at_its_beat() {
     });
     assert!(on_comb, "{best:?}");
 }
+
+mod properties {
+    use paragyro_simulator::effects::{Effect, EffectSpec};
+    use proptest::prelude::*;
+
+    fn effect() -> impl Strategy<Value = Effect> {
+        prop::sample::select(Effect::ALL.to_vec())
+    }
+
+    proptest! {
+        /// Every effect round-trips through its name, its serde form and its spec text.
+        #[test]
+        fn every_effect_round_trips_through_its_name(
+            e in effect(),
+            size in -1e6f64..1e6,
+            beat in -10f64..10.0,
+        ) {
+            prop_assert_eq!(e.name().parse::<Effect>(), Ok(e));
+            prop_assert_eq!(e.to_string(), e.name());
+            let v = serde_json::to_value(e).unwrap();
+            prop_assert_eq!(v.as_str(), Some(e.name()));
+            prop_assert_eq!(serde_json::from_value::<Effect>(v).unwrap(), e);
+            let spec = EffectSpec { effect: e, size, param: e.takes_param().then_some(beat) };
+            prop_assert_eq!(spec.to_string().parse::<EffectSpec>(), Ok(spec.clone()));
+            let v = serde_json::to_value(&spec).unwrap();
+            prop_assert_eq!(serde_json::from_value::<EffectSpec>(v).unwrap(), spec);
+        }
+
+        /// A name that is none of the effects' is rejected with the list of the valid ones.
+        #[test]
+        fn unknown_names_are_rejected_with_the_valid_ones(name in "[a-z_]{1,24}") {
+            prop_assume!(Effect::ALL.iter().all(|e| e.name() != name));
+            let err = name.parse::<Effect>().unwrap_err().to_string();
+            prop_assert!(err.contains(&format!("unknown effect '{name}'")), "{}", err);
+            for e in Effect::ALL {
+                prop_assert!(err.contains(e.name()), "{} lacks {}", err, e);
+            }
+        }
+    }
+}

@@ -25,24 +25,240 @@
 //! | `quadratic_stiffness` | q (–) | drive −q X², sense −q Y² |
 //! | `readout_gain` | g (–) | the sense pick-off reads (1 + g)·Y |
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::fmt;
+use std::str::FromStr;
 
-/// The effects of the diagnosis library (EFFECTS.md names), in a fixed order.
-pub const LIBRARY: [&str; 9] = [
-    "geometric_nonlinearity",
-    "angular_vibration",
-    "electrostatic_softening",
-    "feedthrough",
-    "nonlinear_damping",
-    "anisodamping",
-    "force_leak",
-    "thermal_drift",
-    "lockin_mismatch",
+/// An effect the simulator can add: its name (`--effect NAME=SIZE`, the records' truth
+/// files, the diagnosis reports), the unit of its size, what it adds, whether the diagnosis
+/// library knows it, how the simulator adds it ([`Effect::add_to`]) and how the diagnosis
+/// tests it ([`Effect::signature`]). Every `match` on it is exhaustive: a new effect is a new
+/// variant here, and the compiler lists every place that must learn it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Effect {
+    /// j: drive −j·Y(XY + 2X'Y'), sense +j·Y·X'² (seed 001).
+    GeometricNonlinearity,
+    /// γ1 (°/s) `@beat_hz`: γ → γ + γ1 sin(Ω_v t + φ).
+    AngularVibration,
+    /// κ: sense −κ(Y + c3·Y³).
+    ElectrostaticSoftening,
+    /// C (µm): measured Y + C·s·(1 + cos 2ψ).
+    Feedthrough,
+    /// η: drive −η X²X', sense −η Y²Y'.
+    NonlinearDamping,
+    /// d = d_xy − d_yx: drive −(d/2)Y', sense +(d/2)X'.
+    Anisodamping,
+    /// ε: sense +ε·s(1 + cos 2ψ)(θ16 X + θ17 X³).
+    ForceLeak,
+    /// TCF (ppm/K): ω_x, ω_y scale by (1 + TCF·(T − 25 °C)).
+    ThermalDrift,
+    /// δ: the lock-in cut-off is (1 + δ) times the header's.
+    LockinMismatch,
+    /// Out of library. q: drive −q X², sense −q Y².
+    QuadraticStiffness,
+    /// Out of library. g: the sense pick-off reads (1 + g)·Y.
+    ReadoutGain,
+}
+
+/// The effects of the diagnosis library (EFFECTS.md names), in a fixed order (the order of
+/// the diagnosis's candidates and of the blind benchmark's draw).
+pub const LIBRARY: [Effect; 9] = [
+    Effect::GeometricNonlinearity,
+    Effect::AngularVibration,
+    Effect::ElectrostaticSoftening,
+    Effect::Feedthrough,
+    Effect::NonlinearDamping,
+    Effect::Anisodamping,
+    Effect::ForceLeak,
+    Effect::ThermalDrift,
+    Effect::LockinMismatch,
 ];
 
 /// Effects the simulator can add that are deliberately not in the diagnosis library.
-pub const OUT_OF_LIBRARY: [&str; 2] = ["quadratic_stiffness", "readout_gain"];
+pub const OUT_OF_LIBRARY: [Effect; 2] = [Effect::QuadraticStiffness, Effect::ReadoutGain];
+
+/// How the diagnosis tests an effect of its library (its columns in `y ≈ C·a`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Signature {
+    /// A force term projected on the harmonics and filtered like the rows (one column).
+    Force,
+    /// A fixed combination of the θ columns (one column), possibly needing a record column
+    /// (the rate table, the die temperature).
+    Theta,
+    /// The finite-difference response of the rows to a measurement change (one column).
+    Measurement,
+    /// An in-phase and a quadrature column at a beat found by a scan (two columns).
+    Vibration,
+}
+
+impl Effect {
+    /// Every effect the simulator knows, library first.
+    pub const ALL: [Effect; 11] = [
+        Effect::GeometricNonlinearity,
+        Effect::AngularVibration,
+        Effect::ElectrostaticSoftening,
+        Effect::Feedthrough,
+        Effect::NonlinearDamping,
+        Effect::Anisodamping,
+        Effect::ForceLeak,
+        Effect::ThermalDrift,
+        Effect::LockinMismatch,
+        Effect::QuadraticStiffness,
+        Effect::ReadoutGain,
+    ];
+
+    /// The name (`--effect NAME=SIZE`, truth files, reports).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Effect::GeometricNonlinearity => "geometric_nonlinearity",
+            Effect::AngularVibration => "angular_vibration",
+            Effect::ElectrostaticSoftening => "electrostatic_softening",
+            Effect::Feedthrough => "feedthrough",
+            Effect::NonlinearDamping => "nonlinear_damping",
+            Effect::Anisodamping => "anisodamping",
+            Effect::ForceLeak => "force_leak",
+            Effect::ThermalDrift => "thermal_drift",
+            Effect::LockinMismatch => "lockin_mismatch",
+            Effect::QuadraticStiffness => "quadratic_stiffness",
+            Effect::ReadoutGain => "readout_gain",
+        }
+    }
+
+    /// The unit of the size, for reports ("" for non-dimensional sizes).
+    pub const fn unit(self) -> &'static str {
+        match self {
+            Effect::AngularVibration => "°/s",
+            Effect::Feedthrough => "µm",
+            Effect::ThermalDrift => "ppm/K",
+            Effect::GeometricNonlinearity
+            | Effect::ElectrostaticSoftening
+            | Effect::NonlinearDamping
+            | Effect::Anisodamping
+            | Effect::ForceLeak
+            | Effect::LockinMismatch
+            | Effect::QuadraticStiffness
+            | Effect::ReadoutGain => "",
+        }
+    }
+
+    /// One line: the size, its unit and the terms added.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Effect::GeometricNonlinearity => "j: drive −j·Y(XY + 2X'Y'), sense +j·Y·X'²",
+            Effect::AngularVibration => {
+                "γ1 °/s [@beat Hz, default 1.5]: γ + γ1·sin(Ω_v t), Ω_v = pump + beat"
+            }
+            Effect::ElectrostaticSoftening => "κ: sense −κ(Y + c3·Y³), c3 = 2/9",
+            Effect::Feedthrough => "C µm: measured Y + C·s(1 + cos2ψ)",
+            Effect::NonlinearDamping => "η: drive −ηX²X', sense −ηY²Y'",
+            Effect::Anisodamping => "d: drive −(d/2)Y', sense +(d/2)X' (rate bias −d/4 in γ)",
+            Effect::ForceLeak => "ε: sense +ε·s(1 + cos2ψ)(θ16 X + θ17 X³)",
+            Effect::ThermalDrift => "TCF ppm/K: ω_x, ω_y × (1 + TCF·(T − 25 °C))",
+            Effect::LockinMismatch => "δ: lock-in cut-off (1 + δ) × the header's",
+            Effect::QuadraticStiffness => "q: drive −qX², sense −qY²",
+            Effect::ReadoutGain => "g: sense pick-off reads (1 + g)·Y",
+        }
+    }
+
+    /// How the diagnosis tests it; `None`: outside the library (the diagnosis should
+    /// answer `unknown` for it).
+    pub const fn signature(self) -> Option<Signature> {
+        match self {
+            Effect::GeometricNonlinearity | Effect::NonlinearDamping | Effect::ForceLeak => {
+                Some(Signature::Force)
+            }
+            Effect::ElectrostaticSoftening | Effect::Anisodamping | Effect::ThermalDrift => {
+                Some(Signature::Theta)
+            }
+            Effect::Feedthrough | Effect::LockinMismatch => Some(Signature::Measurement),
+            Effect::AngularVibration => Some(Signature::Vibration),
+            Effect::QuadraticStiffness | Effect::ReadoutGain => None,
+        }
+    }
+
+    /// Whether the diagnosis library knows it.
+    pub const fn in_library(self) -> bool {
+        self.signature().is_some()
+    }
+
+    /// Whether it takes a secondary parameter (`NAME=SIZE@PARAM`): the vibration's beat, Hz.
+    pub const fn takes_param(self) -> bool {
+        matches!(self, Effect::AngularVibration)
+    }
+
+    /// How the simulator adds it: `size` (and `param`) into the plant's effect sizes
+    /// (sizes of repeated effects add; `gamma_per_dps` converts °/s to the non-dimensional γ).
+    pub fn add_to(
+        self,
+        e: &mut Effects,
+        size: f64,
+        param: Option<f64>,
+        gamma_per_dps: f64,
+    ) -> Result<(), String> {
+        let v = size;
+        match self {
+            Effect::GeometricNonlinearity => e.geometric += v,
+            Effect::AngularVibration => {
+                e.vib_gamma += v * gamma_per_dps;
+                if let Some(b) = param {
+                    e.vib_beat_hz = b;
+                }
+            }
+            Effect::ElectrostaticSoftening => e.electrostatic += v,
+            Effect::Feedthrough => e.feedthrough += v,
+            Effect::NonlinearDamping => e.nl_damping += v,
+            Effect::Anisodamping => e.anisodamping += v,
+            Effect::ForceLeak => e.force_leak += v,
+            Effect::ThermalDrift => e.tcf_ppm_k += v,
+            Effect::LockinMismatch => {
+                if v <= -0.9 {
+                    return Err(format!("lockin_mismatch = {v} must be > −0.9"));
+                }
+                e.lockin_mismatch += v
+            }
+            Effect::QuadraticStiffness => e.quadratic += v,
+            Effect::ReadoutGain => e.readout_gain += v,
+        }
+        Ok(())
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(self.name())
+    }
+}
+
+/// An effect name that is not one of [`Effect::ALL`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UnknownEffect(pub String);
+
+impl fmt::Display for UnknownEffect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let known: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+        write!(
+            f,
+            "unknown effect '{}' (known: {})",
+            self.0,
+            known.join(", ")
+        )
+    }
+}
+
+impl std::error::Error for UnknownEffect {}
+
+impl FromStr for Effect {
+    type Err = UnknownEffect;
+
+    /// The effect of a name; the error lists the valid names.
+    fn from_str(s: &str) -> Result<Self, UnknownEffect> {
+        Effect::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| UnknownEffect(s.to_string()))
+    }
+}
 
 /// Cubic-to-linear ratio of the electrostatic softening (balanced parallel plates with a
 /// 3 µm gap: F ∝ y + 2y³/g²).
@@ -54,21 +270,23 @@ pub const VIB_BEAT_HZ: f64 = 1.5;
 /// Reference temperature of the simulator's configuration (thermal drift is 0 there), °C.
 pub const T_REF_C: f64 = 25.0;
 
-/// One effect and its size, as given on the command line (`NAME=SIZE[@PARAM]`).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+/// One effect and its size, as given on the command line (`NAME=SIZE[@PARAM]`); serialised
+/// (truth files) as `{"name": NAME, "size": SIZE, "param"?: PARAM}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EffectSpec {
-    /// The effect's name.
-    pub name: String,
+    /// The effect.
+    #[serde(rename = "name")]
+    pub effect: Effect,
     /// Its size (in the effect's unit, see the module docs).
     pub size: f64,
     /// Its secondary parameter (angular vibration: the beat in Hz), if given.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub param: Option<f64>,
 }
 
 impl fmt::Display for EffectSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}={}", self.name, self.size)?;
+        write!(f, "{}={}", self.effect, self.size)?;
         if let Some(p) = self.param {
             write!(f, "@{p}")?;
         }
@@ -76,57 +294,7 @@ impl fmt::Display for EffectSpec {
     }
 }
 
-/// Every effect the simulator knows (library first).
-pub fn known_effects() -> impl Iterator<Item = &'static str> {
-    LIBRARY.iter().chain(OUT_OF_LIBRARY.iter()).copied()
-}
-
-/// Each effect with a one-line description (size, unit, terms), library first.
-pub fn describe() -> Vec<(&'static str, &'static str)> {
-    vec![
-        (
-            "geometric_nonlinearity",
-            "j: drive −j·Y(XY + 2X'Y'), sense +j·Y·X'²",
-        ),
-        (
-            "angular_vibration",
-            "γ1 °/s [@beat Hz, default 1.5]: γ + γ1·sin(Ω_v t), Ω_v = pump + beat",
-        ),
-        (
-            "electrostatic_softening",
-            "κ: sense −κ(Y + c3·Y³), c3 = 2/9",
-        ),
-        ("feedthrough", "C µm: measured Y + C·s(1 + cos2ψ)"),
-        ("nonlinear_damping", "η: drive −ηX²X', sense −ηY²Y'"),
-        (
-            "anisodamping",
-            "d: drive −(d/2)Y', sense +(d/2)X' (rate bias −d/4 in γ)",
-        ),
-        ("force_leak", "ε: sense +ε·s(1 + cos2ψ)(θ16 X + θ17 X³)"),
-        (
-            "thermal_drift",
-            "TCF ppm/K: ω_x, ω_y × (1 + TCF·(T − 25 °C))",
-        ),
-        (
-            "lockin_mismatch",
-            "δ: lock-in cut-off (1 + δ) × the header's",
-        ),
-        ("quadratic_stiffness", "q: drive −qX², sense −qY²"),
-        ("readout_gain", "g: sense pick-off reads (1 + g)·Y"),
-    ]
-}
-
-/// The unit of an effect's size, for reports.
-pub fn unit(name: &str) -> &'static str {
-    match name {
-        "angular_vibration" => "°/s",
-        "feedthrough" => "µm",
-        "thermal_drift" => "ppm/K",
-        _ => "",
-    }
-}
-
-impl std::str::FromStr for EffectSpec {
+impl FromStr for EffectSpec {
     type Err = String;
 
     /// Parses `NAME=SIZE` or `NAME=SIZE@PARAM` and checks the name and the numbers.
@@ -134,13 +302,10 @@ impl std::str::FromStr for EffectSpec {
         let (name, rest) = s
             .split_once('=')
             .ok_or_else(|| format!("'{s}': expected NAME=SIZE (e.g. nonlinear_damping=1e-4)"))?;
-        let name = name.trim();
-        if !known_effects().any(|k| k == name) {
-            return Err(format!(
-                "unknown effect '{name}' (known: {})",
-                known_effects().collect::<Vec<_>>().join(", ")
-            ));
-        }
+        let effect: Effect = name
+            .trim()
+            .parse()
+            .map_err(|e: UnknownEffect| e.to_string())?;
         let (size, param) = match rest.split_once('@') {
             Some((a, b)) => (a, Some(b)),
             None => (rest, None),
@@ -158,13 +323,13 @@ impl std::str::FromStr for EffectSpec {
         };
         let size = num(size, "size")?;
         let param = param.map(|p| num(p, "parameter")).transpose()?;
-        if param.is_some() && name != "angular_vibration" {
+        if param.is_some() && !effect.takes_param() {
             return Err(format!(
                 "'{s}': only angular_vibration takes @PARAM (beat, Hz)"
             ));
         }
         Ok(EffectSpec {
-            name: name.to_string(),
+            effect,
             size,
             param,
         })
@@ -212,31 +377,7 @@ impl Effects {
             ..Effects::default()
         };
         for s in specs {
-            let v = s.size;
-            match s.name.as_str() {
-                "geometric_nonlinearity" => e.geometric += v,
-                "angular_vibration" => {
-                    e.vib_gamma += v * gamma_per_dps;
-                    if let Some(b) = s.param {
-                        e.vib_beat_hz = b;
-                    }
-                }
-                "electrostatic_softening" => e.electrostatic += v,
-                "feedthrough" => e.feedthrough += v,
-                "nonlinear_damping" => e.nl_damping += v,
-                "anisodamping" => e.anisodamping += v,
-                "force_leak" => e.force_leak += v,
-                "thermal_drift" => e.tcf_ppm_k += v,
-                "lockin_mismatch" => {
-                    if v <= -0.9 {
-                        return Err(format!("lockin_mismatch = {v} must be > −0.9"));
-                    }
-                    e.lockin_mismatch += v
-                }
-                "quadratic_stiffness" => e.quadratic += v,
-                "readout_gain" => e.readout_gain += v,
-                other => return Err(format!("unknown effect '{other}'")),
-            }
+            s.effect.add_to(&mut e, s.size, s.param, gamma_per_dps)?;
         }
         Ok(e)
     }
@@ -288,8 +429,8 @@ mod tests {
     fn parse_specs() {
         let e: EffectSpec = "nonlinear_damping=1e-4".parse().unwrap();
         assert_eq!(
-            (e.name.as_str(), e.size, e.param),
-            ("nonlinear_damping", 1e-4, None)
+            (e.effect, e.size, e.param),
+            (Effect::NonlinearDamping, 1e-4, None)
         );
         let e: EffectSpec = "angular_vibration=20@2.5".parse().unwrap();
         assert_eq!((e.size, e.param), (20.0, Some(2.5)));
@@ -305,6 +446,37 @@ mod tests {
         }
         let err = "warp_drive=1".parse::<EffectSpec>().unwrap_err();
         assert!(err.contains("geometric_nonlinearity"), "{err}");
+    }
+
+    #[test]
+    fn an_unknown_name_is_rejected_with_every_valid_name() {
+        let err = "warp_drive".parse::<Effect>().unwrap_err().to_string();
+        assert!(
+            err.starts_with("unknown effect 'warp_drive' (known: "),
+            "{err}"
+        );
+        for e in Effect::ALL {
+            assert!(err.contains(e.name()), "{err} lacks {e}");
+        }
+        let err = "warp_drive=1".parse::<EffectSpec>().unwrap_err();
+        assert!(Effect::ALL.iter().all(|e| err.contains(e.name())), "{err}");
+    }
+
+    #[test]
+    fn library_and_outside_partition_every_effect() {
+        let mut both: Vec<Effect> = LIBRARY.iter().chain(&OUT_OF_LIBRARY).copied().collect();
+        assert_eq!(both, Effect::ALL);
+        assert!(LIBRARY.iter().all(|e| e.in_library()));
+        assert!(OUT_OF_LIBRARY.iter().all(|e| !e.in_library()));
+        both.dedup();
+        assert_eq!(both.len(), Effect::ALL.len());
+        let spec: EffectSpec = "angular_vibration=20@2.5".parse().unwrap();
+        let j = serde_json::to_value(&spec).unwrap();
+        assert_eq!(
+            j,
+            serde_json::json!({"name": "angular_vibration", "size": 20.0, "param": 2.5})
+        );
+        assert_eq!(serde_json::from_value::<EffectSpec>(j).unwrap(), spec);
     }
 
     #[test]

@@ -21,21 +21,17 @@ pub struct Args {
 
 /// Runs the benchmark (progress on stderr) and prints the headline scores.
 pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
-    let summary = paragyro_diagnose::blind::run(a.n, a.seed, &a.out, &mut |m| note(m))
+    let s = paragyro_diagnose::blind::run(a.n, a.seed, &a.out, &|m| note(m))
         .map_err(fail(EXIT_RUN))?;
-    let p = |k: &str| {
-        summary[k]
-            .as_f64()
-            .map_or("–".into(), |x| format!("{:.0} %", 100.0 * x))
-    };
+    let p = |v: Option<f64>| v.map_or("–".into(), |x| format!("{:.0} %", 100.0 * x));
     ctx.say(&format!(
         "Blind benchmark, N = {}, seed {}:\n  top-1 (single, above limit) {}\n  unknown on out-of-library {}\n  false alarms on clean {}\n  median closure / oracle {}\nWrote {}/score.md and score.json\n",
         a.n,
         a.seed,
-        p("top1_single_above_limit"),
-        p("unknown_on_outside"),
-        p("false_alarms_on_clean"),
-        p("median_closure_over_oracle"),
+        p(s.top1_single_above_limit),
+        p(s.unknown_on_outside),
+        p(s.false_alarms_on_clean),
+        p(s.median_closure_over_oracle),
         a.out.display()
     ))
 }

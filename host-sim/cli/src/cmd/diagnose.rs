@@ -55,38 +55,38 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
     let files = write_report(&a.out, &d, &name).map_err(fail(EXIT_RUN))?;
-    let j = &d.json;
+    let r = &d.report;
     let mut text = format!(
         "Verdict: {}{}\n",
-        d.verdict,
-        j["secondary"]["effect"]
-            .as_str()
-            .map(|e| format!(" (and {e})"))
+        r.verdict,
+        r.verdict
+            .secondary()
+            .map(|s| format!(" (and {})", s.effect))
             .unwrap_or_default()
     );
-    for c in d.ranking.iter().filter(|c| c.untestable.is_none()).take(3) {
+    for c in r.ranking.iter().filter(|c| c.untestable.is_none()).take(3) {
         text.push_str(&format!(
             "  {:<24} size {:.4e} ± {:.1e} {}  gap closure {:5.1} %{}\n",
             c.effect,
-            c.size,
-            c.size_sigma,
-            paragyro_simulator::effects::unit(&c.effect),
+            c.size.unwrap_or(f64::NAN),
+            c.size_sigma.unwrap_or(f64::NAN),
+            c.effect.unit(),
             100.0 * c.gap_closure,
             if c.significant { "  significant" } else { "" }
         ));
     }
     text.push_str(&format!(
         "Held-out gap: {:.4e} → {:.4e} ({:.1} % closed); output error closure {}\n",
-        j["gap_before"].as_f64().unwrap_or(f64::NAN),
-        j["gap_after"].as_f64().unwrap_or(f64::NAN),
-        100.0 * j["gap_closure"].as_f64().unwrap_or(f64::NAN),
-        j["output_error"]["closure"]
-            .as_f64()
-            .map_or("not computed".into(), |v| format!("{:.1} %", 100.0 * v))
+        r.gap_before,
+        r.gap_after,
+        100.0 * r.gap_closure,
+        r.output_error
+            .as_ref()
+            .map_or("not computed".into(), |o| format!("{:.1} %", 100.0 * o.closure))
     ));
     text.push_str(&format!(
         "Took {:.2} s. Wrote {} files to {}\n",
-        j["seconds"].as_f64().unwrap_or(f64::NAN),
+        r.seconds,
         files.len(),
         a.out.display()
     ));

@@ -1,0 +1,310 @@
+//! The simulator re-run open-loop on a record's own inputs (pump frequency and amplitude,
+//! accelerations, die temperature), with or without effects, and the output error of its
+//! lock-in channels against the record's.
+
+use std::f64::consts::TAU;
+
+use paragyro_core::physics::theta_from_physical;
+use paragyro_simulator::effects::{EffectSpec, Effects, T_REF_C};
+use paragyro_simulator::lockin::LockinOut;
+use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
+use paragyro_simulator::record::Record;
+use serde::{Deserialize, Serialize};
+
+use super::Model;
+use super::rows::{first_pump_hz, gamma_per_dps, psi_of};
+
+/// Samples re-simulated before a chunk's first sample (from the record's state there) so
+/// that the modes and the lock-in have forgotten the restart (0.5 s ≫ the 29 ms mode and
+/// 2.6 ms lock-in time constants).
+const RESIM_OVERLAP_S: f64 = 0.5;
+
+/// The simulator re-run open-loop on a record's inputs: pump frequency and amplitude,
+/// accelerations, die temperature; θ of the model with the given rate (or the rate
+/// table's), plus `effects`.
+#[derive(Clone, Copy, Debug)]
+pub struct Resim<'a> {
+    /// The record whose inputs drive the simulator.
+    pub rec: &'a Record,
+    /// The simulator's configuration.
+    pub model: &'a Model,
+    /// The rate γ when the record has no rate table (`None`: the model's).
+    pub gamma: Option<f64>,
+    /// The rate table, °/s per sample (takes precedence over `gamma`).
+    pub rate_ref: Option<&'a [f64]>,
+    /// Effects added to the simulator.
+    pub effects: &'a [EffectSpec],
+    /// Angular vibration phase φ0, rad.
+    pub vib_phase0: f64,
+    /// RK4 steps per carrier period.
+    pub steps_per_period: usize,
+}
+
+impl Resim<'_> {
+    /// The lock-in outputs for the samples `span`, on the record's branch (ψ or ψ + π) of
+    /// the parametric oscillation. The span is split in two halves computed in parallel; a half
+    /// that does not start at sample 0 starts 0.5 s early from the record's own state.
+    pub fn run(&self, span: std::ops::Range<usize>) -> anyhow::Result<Vec<LockinOut>> {
+        let rec = self.rec;
+        let psi = psi_of(rec);
+        let (k0, k1) = (span.start, span.end.min(rec.rows.len()));
+        let mid = k0 + (k1 - k0) / 2;
+        let halves = crate::par::try_map(
+            &[(k0, mid), (mid, k1)],
+            |(a, b)| format!("the re-simulation of samples {a}..{b}"),
+            |&(a, b)| self.chunk(&psi, a, b),
+        )?;
+        let mut out: Vec<LockinOut> = halves.into_iter().flatten().collect();
+        if k0 == 0 {
+            // the first half starts from rest: put it on the record's branch
+            let (mut same, mut flip) = (0.0, 0.0);
+            for k in mid / 2..mid {
+                let x = rec.rows[k].x_um[0];
+                let o = out[k].x[0];
+                same += (x.0 - o.0).powi(2) + (x.1 - o.1).powi(2);
+                flip += (x.0 + o.0).powi(2) + (x.1 + o.1).powi(2);
+            }
+            if flip < same {
+                for o in out.iter_mut().take(mid) {
+                    o.x[0] = (-o.x[0].0, -o.x[0].1);
+                    o.x[2] = (-o.x[2].0, -o.x[2].1);
+                    o.y[0] = (-o.y[0].0, -o.y[0].1);
+                    o.y[2] = (-o.y[2].0, -o.y[2].1);
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Output error of re-simulated lock-in outputs against a record.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct OutputError {
+    /// Drive channels (DC, 1st, 3rd harmonic): rms error relative to the record's rms.
+    pub drive: f64,
+    /// Sense channels, same.
+    pub sense: f64,
+    /// Both axes.
+    pub combined: f64,
+    /// Both axes with the record's own noise removed (its energy estimated from the
+    /// sample-to-sample differences of the error and the lock-in noise's known ratio).
+    pub above_noise: f64,
+}
+
+/// `E|Δn|²/E|n|²` of the lock-in output noise of white displacement noise (the simulator's
+/// lock-in at the record's settings, gyro at rest): the error's slow part barely moves
+/// from sample to sample, its noise part does, by this ratio.
+pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
+    let h = &rec.header;
+    let omega0 = TAU * h.f0_hz;
+    let cfg = SimConfig {
+        omega0_rad_s: omega0,
+        fs_hz: h.fs_hz,
+        steps_per_period: 32,
+        omega_max: 1.05,
+        lpf_order: h.lockin_lpf_order,
+        lpf_hz: h.lockin_lpf_hz,
+        noise_density: 1e-6,
+        seed: 7,
+    };
+    let mut sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let mut th = Theta::table2();
+    th.drive[5] = 0.0;
+    th.drive[6] = 0.0;
+    let u = PlantInputs {
+        omega: 1.0,
+        s: 1.0,
+        ax: 0.0,
+        ay: 0.0,
+    };
+    let mut prev: Option<LockinOut> = None;
+    let (mut dd, mut nn) = (0.0, 0.0);
+    for k in 0..600 {
+        sim.advance(&th, &u, &u);
+        let o = sim.lockin();
+        if k >= 20 {
+            let v = |o: &LockinOut| {
+                [
+                    o.x0, o.x[0].0, o.x[0].1, o.x[2].0, o.x[2].1, o.y0, o.y[0].0, o.y[0].1,
+                    o.y[2].0, o.y[2].1,
+                ]
+            };
+            if let Some(p) = &prev {
+                for (a, b) in v(&o).iter().zip(v(p)) {
+                    dd += (a - b).powi(2);
+                    nn += a * a;
+                }
+            }
+        }
+        prev = Some(o);
+    }
+    Ok(if nn > 0.0 { dd / nn } else { 1.0 })
+}
+
+/// Output error of re-simulated lock-in outputs `sim` (indexed like the record) against
+/// the record on `span`: rms error of the DC, 1st and 3rd harmonic channels relative to
+/// the rms of the record's channels of both axes; `diff_ratio` from
+/// [`lockin_noise_diff_ratio`].
+pub fn output_error(
+    rec: &Record,
+    sim: &[LockinOut],
+    span: std::ops::Range<usize>,
+    diff_ratio: f64,
+) -> OutputError {
+    let l0 = rec.header.l0_um;
+    let err = |k: usize| -> [f64; 10] {
+        let (r, o) = (&rec.rows[k], &sim[k]);
+        [
+            r.x0_um - o.x0 * l0,
+            r.x_um[0].0 - o.x[0].0 * l0,
+            r.x_um[0].1 - o.x[0].1 * l0,
+            r.x_um[2].0 - o.x[2].0 * l0,
+            r.x_um[2].1 - o.x[2].1 * l0,
+            r.y0_um - o.y0 * l0,
+            r.y_um[0].0 - o.y[0].0 * l0,
+            r.y_um[0].1 - o.y[0].1 * l0,
+            r.y_um[2].0 - o.y[2].0 * l0,
+            r.y_um[2].1 - o.y[2].1 * l0,
+        ]
+    };
+    let (mut ex, mut ey, mut nn, mut dd) = (0.0, 0.0, 0.0, 0.0);
+    let mut prev: Option<[f64; 10]> = None;
+    for k in span {
+        let e = err(k);
+        ex += e[..5].iter().map(|v| v * v).sum::<f64>();
+        ey += e[5..].iter().map(|v| v * v).sum::<f64>();
+        if let Some(p) = prev {
+            dd += e.iter().zip(p).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        }
+        prev = Some(e);
+        let r = &rec.rows[k];
+        for v in [r.x_um[0], r.x_um[2], r.y_um[0], r.y_um[2]] {
+            nn += v.0 * v.0 + v.1 * v.1;
+        }
+        nn += r.x0_um * r.x0_um + r.y0_um * r.y0_um;
+    }
+    let nn = nn.max(1e-300);
+    let noise = dd / diff_ratio.max(1e-12);
+    OutputError {
+        drive: (ex / nn).sqrt(),
+        sense: (ey / nn).sqrt(),
+        combined: ((ex + ey) / nn).sqrt(),
+        above_noise: ((ex + ey - noise).max(0.0) / nn).sqrt(),
+    }
+}
+
+/// State [X, X', Y, Y'] reconstructed from a record row's harmonics at phase ψ.
+fn state_of(r: &paragyro_simulator::record::RecordRow, psi: f64, om: f64, l0: f64) -> [f64; 4] {
+    let (mut x, mut xd, mut y, mut yd) = (r.x0_um / l0, 0.0, r.y0_um / l0, 0.0);
+    for k in 0..3 {
+        let kf = (k + 1) as f64;
+        let (s, c) = (kf * psi).sin_cos();
+        let (a, b) = (r.x_um[k], r.y_um[k]);
+        x += (a.0 * c - a.1 * s) / l0;
+        xd += kf * om * (-a.0 * s - a.1 * c) / l0;
+        y += (b.0 * c - b.1 * s) / l0;
+        yd += kf * om * (-b.0 * s - b.1 * c) / l0;
+    }
+    [x, xd, y, yd]
+}
+
+impl Resim<'_> {
+    /// One chunk `[k0, k1)` of [`Resim::run`].
+    fn chunk(&self, psi: &[f64], k0: usize, k1: usize) -> anyhow::Result<Vec<LockinOut>> {
+        let Resim {
+            rec,
+            model,
+            gamma,
+            rate_ref,
+            effects,
+            vib_phase0,
+            steps_per_period,
+        } = *self;
+        let f_ref = first_pump_hz(rec);
+        let h = &rec.header;
+        let omega0 = TAU * h.f0_hz;
+        let gpd = gamma_per_dps(omega0);
+        let mut fx = Effects::from_specs(effects, gpd).map_err(anyhow::Error::msg)?;
+        fx.vib_phase0 = vib_phase0;
+        let pump_max = rec
+            .rows
+            .iter()
+            .map(|r| r.pump_hz)
+            .filter(|p| p.is_finite())
+            .fold(0.0, f64::max);
+        let simcfg = SimConfig {
+            omega0_rad_s: omega0,
+            fs_hz: h.fs_hz,
+            steps_per_period,
+            omega_max: (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5),
+            lpf_order: h.lockin_lpf_order,
+            lpf_hz: h.lockin_lpf_hz * (1.0 + fx.lockin_mismatch),
+            noise_density: 0.0,
+            seed: 1,
+        };
+        let accel_si = h.l0_um * 1e-6 * omega0 * omega0;
+        let input = |k: usize| -> PlantInputs {
+            let r = &rec.rows[k];
+            let ok = |v: f64, d: f64| if v.is_finite() { v } else { d };
+            PlantInputs {
+                omega: ok(r.pump_hz, f_ref) / (2.0 * h.f0_hz),
+                s: ok((r.pump_amp_v / h.pump_amp_ref_v).powi(2), 1.0),
+                ax: ok(r.ax_mps2, 0.0) / accel_si,
+                ay: ok(r.ay_mps2, 0.0) / accel_si,
+            }
+        };
+        let start = if k0 == 0 {
+            0
+        } else {
+            k0.saturating_sub((RESIM_OVERLAP_S * h.fs_hz) as usize)
+        };
+        let first = &rec.rows[start];
+        let z0 = if start == 0 && first.x_abs(1) < 0.05 * h.l0_um {
+            [0.01, 0.0, 0.0, 0.0] // from rest: the simulator's start-up convention
+        } else {
+            state_of(first, psi[start], input(start).omega, h.l0_um)
+        };
+        let mut sim = GyroSim::new(&simcfg, z0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+        sim.set_effects(fx, TAU * (f_ref + fx.vib_beat_hz) / omega0);
+        if start > 0 {
+            sim.restart_at(start as u64, z0, psi[start]);
+        }
+        let mut phys = model.phys;
+        let mut out = Vec::with_capacity(k1 - k0);
+        for k in start..k1 {
+            if k >= k0 {
+                out.push(sim.lockin());
+            }
+            if k + 1 == rec.rows.len() {
+                break;
+            }
+            phys.gamma = match (rate_ref, gamma) {
+                (Some(rr), _) => gpd * rr[k],
+                (None, Some(g)) => g,
+                (None, None) => model.phys.gamma,
+            };
+            let (mut d, mut s) = theta_from_physical(&phys);
+            if fx.tcf_ppm_k != 0.0 {
+                let tc = rec.rows[k].temp_c.unwrap_or(T_REF_C);
+                fx.thermal_theta(&mut d, &mut s, phys.wx2, phys.wy2, tc);
+            }
+            sim.advance(&Theta { drive: d, sense: s }, &input(k), &input(k + 1));
+        }
+        Ok(out)
+    }
+}
+
+/// The record with its lock-in channels replaced by `li` (same inputs).
+pub(crate) fn with_lockin(rec: &Record, li: &[LockinOut]) -> Record {
+    let mut r = rec.clone();
+    let l0 = rec.header.l0_um;
+    for (row, o) in r.rows.iter_mut().zip(li) {
+        row.x0_um = o.x0 * l0;
+        row.y0_um = o.y0 * l0;
+        for k in 0..3 {
+            row.x_um[k] = (o.x[k].0 * l0, o.x[k].1 * l0);
+            row.y_um[k] = (o.y[k].0 * l0, o.y[k].1 * l0);
+        }
+    }
+    r
+}

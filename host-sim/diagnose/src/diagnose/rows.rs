@@ -1,0 +1,352 @@
+//! Stage 1, the simulator's rows on the record: the core's estimator runs open-loop on the
+//! record with its linearisation point fixed at the model, so every sample gives the ten
+//! regression rows as the innovation `y = z − Φ·θ_model`, weighted to unit noise. With the
+//! re-simulation, the rows of the simulator re-run on the record's inputs are subtracted
+//! (the rows' own approximations cancel). Also the spans: warm-up, fit blocks, guard,
+//! held-out.
+
+use std::f64::consts::{PI, TAU};
+use std::ops::Range;
+
+use paragyro_core::physics::{gamma_from_rate_dps, theta_from_physical};
+use paragyro_core::rows::{Envelopes, Known, NROWS};
+use paragyro_core::svf::SvfCoeffs;
+use paragyro_core::{Config, Estimator};
+use paragyro_simulator::lockin::LockinOut;
+use paragyro_simulator::record::{Record, config_for};
+
+use super::resim::{Resim, with_lockin};
+use super::{BLOCKS, FIT_FRACTION, GUARD_S, Model, NR, Options, Timing, WARMUP_S};
+
+/// One estimator pass: per sample the weighted innovation rows, the weighted θ columns,
+/// the envelopes and the known signals the rows were built from.
+pub(crate) struct Pass {
+    /// Weighted innovations y (5 drive, 5 sense).
+    pub y: Vec<[f64; NR]>,
+    /// Weighted θ columns (8 drive, 6 sense), each as 10 rows.
+    pub theta: Vec<[[f64; NR]; 14]>,
+    pub env: Vec<Envelopes<f64>>,
+    pub known: Vec<Known<f64>>,
+    /// The rows fed the RLS (valid input, not gated).
+    pub usable: Vec<bool>,
+    /// Row weights (drive, sense).
+    pub w: ([f64; NROWS], [f64; NROWS]),
+}
+
+fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
+    let mut cfg = config_for(rec);
+    cfg.nominal = model.phys;
+    cfg.nominal.gamma = gamma;
+    cfg.nominal.gamma_p = 0.0;
+    cfg.rls.relinearize_s = 0.0;
+    cfg.retune.enabled = false;
+    cfg
+}
+
+/// One pass of the estimator over the record, `edit` changing each sample first.
+pub(crate) fn run_pass(
+    rec: &Record,
+    cfg: &Config,
+    edit: &dyn Fn(usize, &mut paragyro_core::Sample<f64>),
+) -> anyhow::Result<Pass> {
+    let mut est: Estimator<f64> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let n = rec.rows.len();
+    let (w1, w2) = est.row_weights();
+    let mut p = Pass {
+        y: Vec::with_capacity(n),
+        theta: Vec::with_capacity(n),
+        env: Vec::with_capacity(n),
+        known: Vec::with_capacity(n),
+        usable: Vec::with_capacity(n),
+        w: (w1, w2),
+    };
+    let inv_l0 = 1.0 / rec.header.l0_um;
+    for (k, r) in rec.rows.iter().enumerate() {
+        let mut s = r.to_sample::<f64>(&rec.header);
+        edit(k, &mut s);
+        let o = est.step(&s);
+        let rows = est.last_rows();
+        let mut y = [0.0; NR];
+        let mut th = [[0.0; NR]; 14];
+        for i in 0..NROWS {
+            y[i] = rows.drive_y[i] * w1[i];
+            y[NROWS + i] = rows.sense_y[i] * w2[i];
+            for j in 0..8 {
+                th[j][i] = rows.drive_phi[i][j] * w1[i];
+            }
+            for j in 0..6 {
+                th[8 + j][NROWS + i] = rows.sense_phi[i][j] * w2[i];
+            }
+        }
+        let l = &s.lockin;
+        let mut e = Envelopes {
+            x0: l.x0_um * inv_l0,
+            y0: l.y0_um * inv_l0,
+            ..Envelopes::default()
+        };
+        for i in 0..3 {
+            e.a[i] = l.x_um[i].scale(inv_l0);
+            e.b[i] = l.y_um[i].scale(inv_l0);
+        }
+        p.y.push(y);
+        p.theta.push(th);
+        p.env.push(e);
+        p.known.push(*est.last_known());
+        p.usable.push(o.updated && y.iter().all(|v| v.is_finite()));
+    }
+    Ok(p)
+}
+
+/// γ per °/s at the record's ω0.
+pub(crate) fn gamma_per_dps(omega0: f64) -> f64 {
+    gamma_from_rate_dps(1.0, omega0)
+}
+
+/// The reference phase ψ (half the pump phase) integrated from the record's pump column
+/// (trapezoid over the linear sweep between samples: exact for the simulator's DDS).
+pub(crate) fn psi_of(rec: &Record) -> Vec<f64> {
+    let mut psi = Vec::with_capacity(rec.rows.len());
+    let mut p = 0.0f64;
+    let mut prev: Option<(f64, f64)> = None;
+    for r in &rec.rows {
+        if let Some((t0, f0)) = prev {
+            let dt = r.t_s - t0;
+            p += PI * 0.5 * (f0 + r.pump_hz) * dt; // ψ' = Ω = π·pump_hz
+            p = paragyro_simulator::plant::wrap_phase(p);
+        }
+        psi.push(p);
+        prev = Some((r.t_s, r.pump_hz));
+    }
+    psi
+}
+
+/// The first valid pump frequency of a record (the reference of the vibration's beat), Hz.
+pub fn first_pump_hz(rec: &Record) -> f64 {
+    rec.rows
+        .iter()
+        .map(|r| r.pump_hz)
+        .find(|p| p.is_finite() && *p > 0.0)
+        .unwrap_or(0.0)
+}
+
+/// The gap in regression form, and what the later stages need of the record.
+pub(crate) struct Rows {
+    /// Sample times, s.
+    pub t: Vec<f64>,
+    /// Sample rate, Hz.
+    pub fs: f64,
+    /// ω0 of the record, rad/s.
+    pub omega0: f64,
+    /// γ per °/s.
+    pub gpd: f64,
+    /// The rate table (°/s per sample), when every row has one.
+    pub rate_ref: Option<Vec<f64>>,
+    /// The die temperature per sample, when every row has a finite one.
+    pub temps: Option<Vec<f64>>,
+    /// The rate the rows are linearised at (the table's mean, or the model's).
+    pub gamma_nom: f64,
+    /// The rate the simulator runs with: fitted on the rows (`None` with a rate table).
+    pub gamma_sim: Option<f64>,
+    /// The core configuration of the rows.
+    pub cfg: Config,
+    /// The drive θ of the model (the force leak's column needs θ16, θ17).
+    pub th1m: [f64; 8],
+    /// The rows' state-variable filter.
+    pub svf: SvfCoeffs<f64>,
+    /// The model's pass (θ columns, envelopes).
+    pub base: Pass,
+    /// The gap: weighted rows of the record minus the simulator's.
+    pub y: Vec<[f64; NR]>,
+    /// Samples whose rows count.
+    pub usable: Vec<bool>,
+    /// The rate column: dθ14/dγ = 2, dθ24/dγ = −2.
+    pub gamma_col: Vec<[f64; NR]>,
+    /// The simulator's lock-in outputs on the record's inputs (with the re-simulation).
+    pub before_sim: Option<Vec<LockinOut>>,
+}
+
+impl Rows {
+    /// Pass 0 (the model's rows), the rate, and the re-simulation of the model.
+    pub(crate) fn build(rec: &Record, opts: &Options, timing: &mut Timing) -> anyhow::Result<Self> {
+        let n = rec.rows.len();
+        anyhow::ensure!(
+            n >= 1000,
+            "the record has {n} samples; the diagnosis needs at least 2 s"
+        );
+        let fs = rec.header.fs_hz;
+        let t: Vec<f64> = rec.rows.iter().map(|r| r.t_s).collect();
+        let omega0 = TAU * rec.header.f0_hz;
+        let gpd = gamma_per_dps(omega0);
+        // the rate: a rate table fixes it, otherwise it is fitted
+        let rate_ref: Option<Vec<f64>> = rec
+            .rows
+            .iter()
+            .all(|r| r.rate_ref_dps.is_some_and(f64::is_finite))
+            .then(|| {
+                rec.rows
+                    .iter()
+                    .map(|r| r.rate_ref_dps.unwrap_or(0.0))
+                    .collect()
+            });
+        let gamma_nom = match &rate_ref {
+            Some(v) => gpd * v.iter().sum::<f64>() / v.len() as f64,
+            None => opts.model.phys.gamma,
+        };
+        let cfg = model_config(rec, &opts.model, gamma_nom);
+        let (th1m, _) = theta_from_physical(&cfg.nominal);
+        let svf = SvfCoeffs::<f64>::new(TAU * cfg.svf_hz / omega0, omega0 / fs);
+        let base = run_pass(rec, &cfg, &|_, _| {})?;
+        let gamma_col: Vec<[f64; NR]> = base
+            .theta
+            .iter()
+            .map(|c| {
+                let mut v = [0.0; NR];
+                for r in 0..NR {
+                    v[r] = 2.0 * c[3][r] - 2.0 * c[11][r];
+                }
+                v
+            })
+            .collect();
+        let temps: Option<Vec<f64>> = rec
+            .rows
+            .iter()
+            .map(|r| r.temp_c.filter(|v| v.is_finite()))
+            .collect();
+        let mut rows = Rows {
+            y: base.y.clone(),
+            usable: base.usable.clone(),
+            gamma_sim: None,
+            t,
+            fs,
+            omega0,
+            gpd,
+            rate_ref,
+            temps,
+            gamma_nom,
+            cfg,
+            th1m,
+            svf,
+            base,
+            gamma_col,
+            before_sim: None,
+        };
+        rows.gamma_sim = rows.rate_ref.is_none().then(|| rows.fitted_rate());
+        timing.tick("rows");
+        rows.subtract_simulator(rec, opts, timing)?;
+        Ok(rows)
+    }
+
+    /// The rate fitted on the rows after the warm-up (least squares on the rate column).
+    fn fitted_rate(&self) -> f64 {
+        let n = self.t.len();
+        let warm = (0..n)
+            .find(|&k| self.t[k] >= self.t[0] + WARMUP_S)
+            .unwrap_or(n);
+        let (mut gg, mut gy) = (0.0, 0.0);
+        for k in warm..n {
+            if self.usable[k] {
+                for r in 0..NR {
+                    gg += self.gamma_col[k][r] * self.gamma_col[k][r];
+                    gy += self.gamma_col[k][r] * self.y[k][r];
+                }
+            }
+        }
+        self.gamma_nom + if gg > 0.0 { gy / gg } else { 0.0 }
+    }
+
+    /// The gap is the record's rows minus the simulator's rows on the same inputs: the
+    /// rows' own approximations (lock-in products, truncated harmonics) cancel. Without
+    /// the re-simulation, a known rate's column times (γ_ref(t) − γ_nom) is subtracted.
+    fn subtract_simulator(
+        &mut self,
+        rec: &Record,
+        opts: &Options,
+        timing: &mut Timing,
+    ) -> anyhow::Result<()> {
+        let n = self.t.len();
+        if opts.resimulate {
+            let resim = Resim {
+                rec,
+                model: &opts.model,
+                gamma: self.gamma_sim,
+                rate_ref: self.rate_ref.as_deref(),
+                effects: &[],
+                vib_phase0: 0.0,
+                steps_per_period: opts.steps_per_period,
+            };
+            let sim = resim.run(0..n)?;
+            let ps = run_pass(&with_lockin(rec, &sim), &self.cfg, &|_, _| {})?;
+            for k in 0..n {
+                for r in 0..NR {
+                    self.y[k][r] -= ps.y[k][r];
+                }
+                self.usable[k] &= ps.usable[k];
+            }
+            self.before_sim = Some(sim);
+            timing.tick("resimulate_model");
+        } else if let Some(rr) = &self.rate_ref {
+            for k in 0..n {
+                let dg = self.gpd * rr[k] - self.gamma_nom;
+                for r in 0..NR {
+                    self.y[k][r] -= dg * self.gamma_col[k][r];
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The spans: first usable sample after the warm-up, the fit blocks, the guard, the
+/// held-out span.
+pub(crate) struct Spans {
+    /// First usable sample after the warm-up.
+    pub first: usize,
+    /// Last usable sample.
+    pub last: usize,
+    /// End of the fit span (first sample at or after it).
+    pub fit_end: usize,
+    /// First held-out sample.
+    pub hold_start: usize,
+    /// Contiguous blocks of the fit span (cluster-robust covariance).
+    pub fit_blocks: Vec<Range<usize>>,
+    /// The held-out samples.
+    pub hold: Range<usize>,
+}
+
+impl Spans {
+    pub(crate) fn of(rows: &Rows) -> anyhow::Result<Self> {
+        let (t, usable) = (&rows.t, &rows.usable);
+        let n = t.len();
+        let first = (0..n)
+            .find(|&k| usable[k] && t[k] >= t[0] + WARMUP_S)
+            .unwrap_or(n);
+        let last = (0..n).rev().find(|&k| usable[k]).unwrap_or(0);
+        anyhow::ensure!(
+            last > first + 500,
+            "fewer than 1 s of usable samples after the {WARMUP_S} s warm-up"
+        );
+        let span = t[last] - t[first];
+        let t_fit_end = t[first] + FIT_FRACTION * span;
+        let fit_end = (first..=last).find(|&k| t[k] >= t_fit_end).unwrap_or(last);
+        let hold_start = (fit_end..=last)
+            .find(|&k| t[k] >= t_fit_end + GUARD_S)
+            .unwrap_or(last);
+        let fit_blocks = (0..BLOCKS)
+            .map(|b| {
+                let a = first + (fit_end - first) * b / BLOCKS;
+                let e = first + (fit_end - first) * (b + 1) / BLOCKS;
+                a..e
+            })
+            .collect();
+        Ok(Spans {
+            first,
+            last,
+            fit_end,
+            hold_start,
+            fit_blocks,
+            hold: hold_start..last + 1,
+        })
+    }
+}

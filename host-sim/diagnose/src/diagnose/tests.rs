@@ -1,0 +1,31 @@
+use std::f64::consts::TAU;
+
+use super::columns::{NSYN, ProjTables};
+use super::lsq::solve_spd;
+
+#[test]
+fn projection_of_known_waveforms() {
+    // f = 1 + 2cos φ − 3 sin 3φ → [f]0 = 1, [f]1 = 2, [f]3 = 3i (e^{−ikφ} convention)
+    let mut f = [0.0; NSYN];
+    for j in 0..NSYN {
+        let ph = TAU * j as f64 / NSYN as f64;
+        f[j] = 1.0 + 2.0 * ph.cos() - 3.0 * (3.0 * ph).sin();
+    }
+    let p = ProjTables::new().project(&f);
+    for (a, b) in p.iter().zip([1.0, 2.0, 0.0, 0.0, 3.0]) {
+        assert!((a - b).abs() < 1e-12, "{p:?}");
+    }
+}
+
+#[test]
+fn spd_solver_handles_collinear_columns() {
+    // two identical columns: the solve must stay finite and reproduce b
+    let g = [2.0, 2.0, 2.0, 2.0];
+    let (x, _) = solve_spd(&g, &[4.0, 4.0], 2);
+    assert!(x.iter().all(|v| v.is_finite()));
+    assert!((2.0 * x[0] + 2.0 * x[1] - 4.0).abs() < 1e-6, "{x:?}");
+    let g = [4.0, 1.0, 1.0, 3.0];
+    let (x, inv) = solve_spd(&g, &[1.0, 2.0], 2);
+    assert!((4.0 * x[0] + x[1] - 1.0).abs() < 1e-9 && (x[0] + 3.0 * x[1] - 2.0).abs() < 1e-9);
+    assert!((inv[0] - 3.0 / 11.0).abs() < 1e-9);
+}

@@ -1,0 +1,258 @@
+//! report.json round-trips through serde: any report (verdicts with and without a second
+//! effect, tested and untestable candidates, with and without the re-simulation, either
+//! rate source) serialises and deserialises to itself, and its keys are report.json's.
+
+use std::collections::BTreeMap;
+
+use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
+use paragyro_diagnose::diagnose::report::{BeatScan, FORMAT};
+use paragyro_diagnose::diagnose::{
+    Answer, Candidate, Energies, HowFar, OutputError, Rate, Report, Secondary, Separation,
+    SpansReport, Thresholds, Verdict,
+};
+use paragyro_simulator::effects::Effect;
+use proptest::prelude::*;
+use proptest::strategy::ValueTree;
+
+fn effect() -> impl Strategy<Value = Effect> {
+    prop::sample::select(Effect::ALL.to_vec())
+}
+
+fn num() -> impl Strategy<Value = f64> {
+    prop_oneof![-1e3f64..1e3, -1e-6f64..1e-6, Just(0.0)]
+}
+
+fn verdict() -> impl Strategy<Value = Verdict> {
+    prop_oneof![
+        Just(Verdict::None),
+        Just(Verdict::Unknown),
+        (effect(), prop::option::of((effect(), num()))).prop_map(|(primary, s)| {
+            Verdict::Effects {
+                primary,
+                secondary: s.map(|(effect, added_closure)| Secondary {
+                    effect,
+                    added_closure,
+                }),
+            }
+        }),
+    ]
+}
+
+fn answer() -> impl Strategy<Value = Answer> {
+    prop_oneof![
+        Just(Answer::None),
+        Just(Answer::Unknown),
+        effect().prop_map(Answer::Effect)
+    ]
+}
+
+fn candidate() -> impl Strategy<Value = Candidate> {
+    (
+        effect(),
+        prop::option::of((num(), num())),
+        (num(), any::<bool>(), num(), num(), num()),
+        prop::collection::vec(effect(), 0..3),
+        prop::option::of(num()),
+    )
+        .prop_map(
+            |(effect, size, (gc, sig, ef, db, re), coherent_with, beat_hz)| Candidate {
+                effect,
+                untestable: size.is_none().then(|| "no temp_c column".to_string()),
+                size: size.map(|s| s.0),
+                size_sigma: size.map(|s| s.1),
+                gap_closure: gc,
+                significant: sig,
+                energy_fraction: ef,
+                delta_bic: db,
+                residual_explainable: re,
+                coherent_with,
+                beat_hz,
+            },
+        )
+}
+
+fn output_error() -> impl Strategy<Value = OutputError> {
+    (num(), num(), num(), num()).prop_map(|(drive, sense, combined, above_noise)| OutputError {
+        drive,
+        sense,
+        combined,
+        above_noise,
+    })
+}
+
+fn how_far() -> impl Strategy<Value = HowFar> {
+    (
+        output_error(),
+        output_error(),
+        num(),
+        prop::option::of(num()),
+    )
+        .prop_map(|(before, after, closure, rate_dps)| HowFar {
+            held_out_span_s: [12.5, 19.998],
+            before,
+            after,
+            closure,
+            closure_raw: closure / 2.0,
+            noise_diff_ratio: 1.9,
+            added: vec!["feedthrough=0.003".into()],
+            rate_dps,
+            note: "rms".into(),
+        })
+}
+
+fn place() -> impl Strategy<Value = Where> {
+    (
+        num(),
+        prop::collection::vec((prop::option::of(num()), num()), 3),
+        num(),
+    )
+        .prop_map(|(share, terciles, correlation)| Where {
+            axis: AxisShare {
+                drive: share,
+                sense: 1.0 - share,
+            },
+            channel: BTreeMap::from([("drive/DC".into(), share), ("sense/DC".into(), 0.5)]),
+            regime: vec![Regime {
+                quantity: "drive amplitude (µm)".into(),
+                terciles: terciles
+                    .into_iter()
+                    .map(|(from, relative_gap_density)| Tercile {
+                        from,
+                        to: from.map(|f| f + 1.0),
+                        relative_gap_density,
+                    })
+                    .collect(),
+                correlation,
+            }],
+            time: TimeSpan {
+                half_of_gap_within_s: [1.0, 2.5],
+                fraction_of_time_holding_half: share,
+                cusum_extreme_at_s: 3.25,
+            },
+        })
+}
+
+fn report() -> impl Strategy<Value = Report> {
+    (
+        verdict(),
+        prop::collection::vec(candidate(), 0..6),
+        (num(), num(), num(), num(), num()),
+        answer(),
+        prop::option::of(how_far()),
+        place(),
+        prop::option::of(prop::option::of(num())),
+        prop::collection::vec(
+            (prop::collection::vec(effect(), 1..3), "[a-z ]{0,12}"),
+            0..3,
+        ),
+    )
+        .prop_map(
+            |(verdict, ranking, (gb, ga, gc, gf, un), closest, far, location, rate, sep)| Report {
+                format: FORMAT.into(),
+                verdict,
+                ranking,
+                gap_before: gb,
+                gap_after: ga,
+                gap_closure: gc,
+                gap_fraction_of_baseline: gf,
+                unexplained_above_noise: un,
+                unexplained_rows: vec!["drive/DC".into()],
+                closest_library_effect: closest,
+                held_out_by_row: vec![RowEnergy {
+                    row: 3,
+                    baseline: gb,
+                    closest: ga,
+                    everything: gc,
+                }],
+                energies: Energies {
+                    note: "weighted".into(),
+                    baseline: gb,
+                    catch_all: ga,
+                    floor: gc,
+                    after: gf,
+                    rows: 41_000,
+                },
+                output_error: far,
+                location,
+                model: "Table 2 (default)".into(),
+                rate: match rate {
+                    None => Rate::Table,
+                    Some(rate_dps) => Rate::Fitted { rate_dps },
+                },
+                spans_s: SpansReport {
+                    fit: [0.5, 11.9],
+                    guard_s: 0.5,
+                    held_out: [12.4, 20.0],
+                },
+                thresholds: Thresholds::current(),
+                vibration_beat_scan: BeatScan {
+                    range_hz: 6.0,
+                    best_hz: gc,
+                },
+                separating_excitation: sep
+                    .into_iter()
+                    .map(|(pair, excitation)| Separation { pair, excitation })
+                    .collect(),
+                samples: 10_001,
+                seconds: 3.5,
+                timing_s: BTreeMap::from([("rows".into(), 0.25)]),
+            },
+        )
+}
+
+/// The keys of report.json (format 1), unchanged by the typed report.
+const KEYS: [&str; 24] = [
+    "closest_library_effect",
+    "energies",
+    "format",
+    "gap_after",
+    "gap_before",
+    "gap_closure",
+    "gap_fraction_of_baseline",
+    "held_out_by_row",
+    "model",
+    "output_error",
+    "ranking",
+    "rate",
+    "samples",
+    "secondary",
+    "seconds",
+    "separating_excitation",
+    "spans_s",
+    "thresholds",
+    "timing_s",
+    "unexplained_above_noise",
+    "unexplained_rows",
+    "verdict",
+    "vibration_beat_scan",
+    "where",
+];
+
+proptest! {
+    #[test]
+    fn report_round_trips_through_serde(r in report()) {
+        let v = serde_json::to_value(&r).unwrap();
+        let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
+        prop_assert_eq!(keys, KEYS.to_vec());
+        let name = r.verdict.to_string();
+        prop_assert_eq!(v["verdict"].as_str(), Some(name.as_str()));
+        let back: Report = serde_json::from_value(v).unwrap();
+        prop_assert_eq!(back, r);
+    }
+}
+
+#[test]
+fn a_secondary_effect_needs_a_primary() {
+    let r = report()
+        .prop_filter("a verdict none", |r| r.verdict == Verdict::None)
+        .new_tree(&mut proptest::test_runner::TestRunner::deterministic())
+        .unwrap()
+        .current();
+    let mut v = serde_json::to_value(&r).unwrap();
+    v["secondary"] = serde_json::json!({"effect": "feedthrough", "added_closure": 0.2});
+    let err = serde_json::from_value::<Report>(v).unwrap_err().to_string();
+    assert!(
+        err.contains("a secondary effect (feedthrough) with the verdict 'none'"),
+        "{err}"
+    );
+}
