@@ -1,13 +1,13 @@
-//! Configuration in SI units, validated once by [`Config::build`].
+//! Configuration in SI units, validated once by [`Config::validate`].
 //!
 //! Everything a person sets is here, with units in the names (Hz, s, µm, m/s², V).
-//! `build()` checks every field and turns the settings into the runtime estimator
-//! (non-dimensional, coefficients precomputed); it returns a [`ConfigError`] naming the
-//! first bad field. After that, the 500 Hz tick cannot fail.
+//! `validate()` checks every field and returns a [`ConfigError`] naming the first bad
+//! one; [`Config::validated`] gives the proof [`ValidConfig`] from which the estimator's
+//! design is built (`Config::build`, `ValidConfig::build` and the design live with the
+//! estimator, `crate::estimator`: this module knows nothing of it). After that, the
+//! 500 Hz tick cannot fail.
 
-use crate::estimator::Estimator;
 use crate::physics::{F0_TABLE2_HZ, L0_TABLE2_UM, Physical, TABLE2};
-use crate::real::Real;
 use core::fmt;
 
 /// How the pump generator moves between two 500 Hz commands. The replica of the lock-in
@@ -344,13 +344,7 @@ impl Config {
         Ok(())
     }
 
-    /// Validates and builds the runtime estimator in precision `T`.
-    pub fn build<T: Real>(&self) -> Result<Estimator<T>, ConfigError> {
-        self.validate()?;
-        Ok(Estimator::from_valid_config(self))
-    }
-
-    /// Validates, giving the proof that [`ValidConfig::build`] needs: a caller that embeds
+    /// Validates, giving the proof that `ValidConfig::build` needs: a caller that embeds
     /// the estimator in a larger value (the firmware's `App`) builds it straight into
     /// place instead of moving it out of a `Result` (≈ 5 KB of stack on the chip).
     pub fn validated(&self) -> Result<ValidConfig<'_>, ConfigError> {
@@ -359,7 +353,7 @@ impl Config {
     }
 
     /// The pump frequency the estimator commands before its first sample, Hz
-    /// (= [`Estimator::initial_pump_hz`], without building one).
+    /// (= [`crate::Estimator::initial_pump_hz`], without building one).
     pub fn initial_pump_hz(&self) -> f64 {
         let om_ref = self.pump_centre_hz / (2.0 * self.f0_hz);
         // the estimator's `pump_hz_of(0.0)`: reference + 2 f0 · 0
@@ -375,12 +369,6 @@ impl ValidConfig<'_> {
     /// The configuration.
     pub fn config(&self) -> &Config {
         self.0
-    }
-
-    /// Builds the runtime estimator in precision `T` (infallible: validated).
-    #[inline(always)] // built in its caller's destination (stack, docs/firmware.md)
-    pub fn build<T: Real>(self) -> Estimator<T> {
-        Estimator::from_valid_config(self.0)
     }
 }
 
