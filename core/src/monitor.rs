@@ -16,6 +16,7 @@
 
 use crate::real::Real;
 use crate::sample::Sample;
+use heapless::HistoryBuf;
 
 pub use crate::sample::N_LOCKIN_CH;
 
@@ -207,7 +208,7 @@ impl<T: Real> ExcitationMeter<T> {
     }
 }
 
-/// Capacity of the settle window ring.
+/// Capacity of the settle window.
 pub const SETTLE_RING: usize = 16;
 
 /// Design of the settle test: one value kept every `every` samples; settled when the
@@ -231,14 +232,12 @@ impl<T: Real> SettleDesign<T> {
     }
 }
 
-/// Settle test on one scalar, sampled at a low rate into a small ring, in the
-/// estimator's precision `T` (the values are `T` in the first place; in `f64` on
+/// Settle test on one scalar, sampled at a low rate into a `heapless::HistoryBuf`, in
+/// the estimator's precision `T` (the values are `T` in the first place; in `f64` on
 /// the chip it was ~2k soft-float instructions on every 25th tick).
 #[derive(Clone, Debug, Default)]
 pub struct SettleTest<T> {
-    ring: [T; SETTLE_RING],
-    len: usize,
-    pos: usize,
+    window: HistoryBuf<T, SETTLE_RING>,
     /// The verdict, recomputed when a value is pushed (the tick only reads it).
     verdict: bool,
 }
@@ -246,8 +245,7 @@ pub struct SettleTest<T> {
 impl<T: Real> SettleTest<T> {
     /// Forgets the history.
     pub fn clear(&mut self) {
-        self.len = 0;
-        self.pos = 0;
+        self.window.clear();
         self.verdict = false;
     }
     /// Feeds the value at sample `k`.
@@ -259,9 +257,7 @@ impl<T: Real> SettleTest<T> {
             self.clear();
             return;
         }
-        self.ring[self.pos] = v;
-        self.pos = (self.pos + 1) % SETTLE_RING;
-        self.len = (self.len + 1).min(SETTLE_RING);
+        self.window.write(v);
         self.verdict = self.evaluate(d);
     }
     /// Settled now.
@@ -269,17 +265,16 @@ impl<T: Real> SettleTest<T> {
         self.verdict
     }
     fn evaluate(&self, d: &SettleDesign<T>) -> bool {
-        if self.len < d.need {
+        if self.window.len() < d.need {
             return false;
         }
         // finite values only (push clears on a non-finite one), so `Real::min/max` agree
         // with `f64::min/max`, and the span does not depend on the order
         let mut lo = T::MAX;
         let mut hi = -T::MAX;
-        for i in 0..d.need {
-            let idx = (self.pos + SETTLE_RING - 1 - i) % SETTLE_RING;
-            lo = lo.min(self.ring[idx]);
-            hi = hi.max(self.ring[idx]);
+        for v in self.window.oldest_ordered().rev().take(d.need) {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
         }
         let scale = hi.abs().max(lo.abs()).max(T::from_f64(1e-30));
         (hi - lo) / scale < d.tol
