@@ -516,3 +516,6 @@ impl fmt::Display for ConfigError {
         )
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -720,4 +720,6 @@ fn residual<T: Real, const N: usize>(y: T, phi: &[T; N], x: &[T; N]) -> T {
 }
 
 #[cfg(test)]
+mod props;
+#[cfg(test)]
 mod tests;

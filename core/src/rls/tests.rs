@@ -1,5 +1,6 @@
 //! Host tests of the Bierman-UD RLS: batch least squares, a-priori innovation, f32 on
-//! ill-conditioned rows against the covariance form, windup, guards.
+//! ill-conditioned rows against the covariance form, windup, guards; property tests
+//! against a nalgebra oracle (`props`).
 #![allow(clippy::needless_range_loop)] // dense matrix algebra in the test oracles
 
 extern crate std;
