@@ -1,17 +1,14 @@
-//! Configuration in SI units, validated once by [`Config::build`].
+//! Configuration in SI units, validated once by [`Config::validate`].
 //!
 //! Everything a person sets is here, with units in the names (Hz, s, µm, m/s², V).
-//! `build()` checks every field and turns the settings into the runtime estimator
-//! (non-dimensional, coefficients precomputed); it returns a [`ConfigError`] naming the
-//! first bad field. After that, the 500 Hz tick cannot fail.
+//! `validate()` checks every field and returns a [`ConfigError`] naming the first bad
+//! one; [`Config::validated`] gives the proof [`ValidConfig`] from which the estimator's
+//! design is built (`Config::build`, `ValidConfig::build` and the design live with the
+//! estimator, `crate::estimator`: this module knows nothing of it). After that, the
+//! 500 Hz tick cannot fail.
 
-use crate::estimator::Estimator;
-use crate::physics::{Physical, TABLE2};
-use crate::real::Real;
+use crate::physics::{F0_TABLE2_HZ, L0_TABLE2_UM, Physical, TABLE2};
 use core::fmt;
-
-/// ω0 of the paper's Table 2: γ = 3.8581e-5 ⇔ 150 °/s gives ω0 = 2.618/3.8581e-5 rad/s.
-pub const TABLE2_OMEGA0_RAD_S: f64 = 2.618 / 3.8581e-5;
 
 /// How the pump generator moves between two 500 Hz commands. The replica of the lock-in
 /// low-pass applied to the commanded pump must assume the same, or its output is off by
@@ -171,13 +168,13 @@ impl Config {
     /// The paper's gyro (Table 2), 1 pm/√Hz front end, the recommended scheme of
     /// FINDINGS §6. The nominal parameters are Table 2 with zero rate.
     pub fn table2() -> Self {
-        let f0_hz = TABLE2_OMEGA0_RAD_S / (2.0 * core::f64::consts::PI);
+        let f0_hz = F0_TABLE2_HZ;
         let mut nominal = TABLE2;
         nominal.gamma = 0.0;
         Config {
             f0_hz,
             fs_hz: 500.0,
-            l0_um: 1.0,
+            l0_um: L0_TABLE2_UM,
             lockin_lpf_order: 4,
             lockin_lpf_hz: 150.0,
             pump_amp_ref_v: 1.0,
@@ -236,28 +233,23 @@ impl Config {
         2.0 * core::f64::consts::PI * self.f0_hz
     }
 
-    /// Checks every field; the error names the first bad one.
+    /// Checks every field; the error names the first bad one (in the order of the
+    /// fields of [`Config`], section by section).
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn validate(&self) -> Result<(), ConfigError> {
-        use ConfigError as E;
-        // the checks are out-of-line functions, not closures inlined at every call
-        // (each inlined f64 test was ~100 bytes of soft-float calls in the firmware image)
-        #[inline(never)]
-        fn pos(v: f64, f: &'static str) -> Result<(), ConfigError> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(E::new(f, "must be finite and > 0"))
-            }
-        }
-        #[inline(never)]
-        fn nonneg(v: f64, f: &'static str) -> Result<(), ConfigError> {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(E::new(f, "must be finite and >= 0"))
-            }
-        }
+        self.validate_front_end()?;
+        self.validate_nominal()?;
+        pos(self.pump_centre_hz, "pump_centre_hz")?;
+        self.dither.validate(self.pump_centre_hz, self.fs_hz)?;
+        self.validate_rows()?;
+        self.rls.validate()?;
+        self.monitor.validate()?;
+        self.retune.validate()
+    }
+
+    /// f0, the sample rate, L0, the lock-in low-pass and the pump reference.
+    #[inline]
+    fn validate_front_end(&self) -> Result<(), ConfigError> {
         pos(self.f0_hz, "f0_hz")?;
         pos(self.fs_hz, "fs_hz")?;
         if self.fs_hz >= self.f0_hz {
@@ -271,7 +263,13 @@ impl Config {
         if self.lockin_lpf_hz >= self.f0_hz {
             return Err(E::new("lockin_lpf_hz", "must be below the carrier f0_hz"));
         }
-        pos(self.pump_amp_ref_v, "pump_amp_ref_v")?;
+        pos(self.pump_amp_ref_v, "pump_amp_ref_v")
+    }
+
+    /// The design parameters: positive where the physics needs it, finite everywhere,
+    /// and no zero θ component (the RLS columns are scaled by |θ_nom|).
+    #[inline]
+    fn validate_nominal(&self) -> Result<(), ConfigError> {
         let n = &self.nominal;
         for (v, f) in [
             (n.mu_x, "nominal.mu_x"),
@@ -297,7 +295,6 @@ impl Config {
                 return Err(E::new(f, "must be finite"));
             }
         }
-        // every nominal θ must be non-zero: columns are scaled by |θ_nom|
         let (t1, t2) = crate::physics::theta_from_physical(n);
         if t1
             .iter()
@@ -309,31 +306,12 @@ impl Config {
                 "gives a zero θ component (columns are scaled by |θ_nom|): make mu_xy, wxy2, alpha_*, beta3 non-zero",
             ));
         }
-        pos(self.pump_centre_hz, "pump_centre_hz")?;
-        let d = &self.dither;
-        nonneg(d.pump_hz, "dither.pump_hz")?;
-        if d.pump_hz >= 0.05 * self.pump_centre_hz {
-            return Err(E::new(
-                "dither.pump_hz",
-                "must be below 5 % of the pump centre",
-            ));
-        }
-        pos(d.freq_hz, "dither.freq_hz")?;
-        if d.freq_hz > self.fs_hz / 20.0 {
-            return Err(E::new("dither.freq_hz", "must be slow: at most fs_hz/20"));
-        }
-        nonneg(d.start_s, "dither.start_s")?;
-        nonneg(d.taper_s, "dither.taper_s")?;
-        if !(d.scale_frac.is_finite() && (0.0..=0.3).contains(&d.scale_frac)) {
-            return Err(E::new("dither.scale_frac", "must be in [0, 0.3]"));
-        }
-        pos(d.scale_freq_hz, "dither.scale_freq_hz")?;
-        if d.scale_freq_hz > self.fs_hz / 20.0 {
-            return Err(E::new(
-                "dither.scale_freq_hz",
-                "must be slow: at most fs_hz/20",
-            ));
-        }
+        Ok(())
+    }
+
+    /// The slow filter corner, the noise density and the row noise.
+    #[inline]
+    fn validate_rows(&self) -> Result<(), ConfigError> {
         pos(self.svf_hz, "svf_hz")?;
         if self.svf_hz > self.fs_hz / 10.0 {
             return Err(E::new("svf_hz", "must be at most fs_hz/10"));
@@ -363,50 +341,10 @@ impl Config {
                 ][i],
             )?;
         }
-        let r = &self.rls;
-        if !(r.forgetting > 0.0 && r.forgetting <= 1.0) {
-            return Err(E::new("rls.forgetting", "must be in (0, 1]"));
-        }
-        pos(r.p0, "rls.p0")?;
-        pos(r.p_reset, "rls.p_reset")?;
-        if !(r.trace_bound_factor.is_finite() && r.trace_bound_factor >= 1.0) {
-            return Err(E::new("rls.trace_bound_factor", "must be finite and >= 1"));
-        }
-        nonneg(r.relinearize_s, "rls.relinearize_s")?;
-        let m = &self.monitor;
-        nonneg(m.gate_startup_s, "monitor.gate_startup_s")?;
-        nonneg(m.gate_jump_s, "monitor.gate_jump_s")?;
-        nonneg(m.bad_input_gate_s, "monitor.bad_input_gate_s")?;
-        pos(m.change_threshold, "monitor.change_threshold")?;
-        if !(m.change_alpha > 0.0 && m.change_alpha <= 1.0) {
-            return Err(E::new("monitor.change_alpha", "must be in (0, 1]"));
-        }
-        nonneg(m.change_hold_s, "monitor.change_hold_s")?;
-        pos(m.full_scale_um, "monitor.full_scale_um")?;
-        pos(m.accel_full_scale_mps2, "monitor.accel_full_scale_mps2")?;
-        nonneg(m.excitation_min_fraction, "monitor.excitation_min_fraction")?;
-        let t = &self.retune;
-        pos(t.ramp_s, "retune.ramp_s")?;
-        pos(t.max_rate_hz_per_s, "retune.max_rate_hz_per_s")?;
-        nonneg(t.deadband_hz, "retune.deadband_hz")?;
-        if !(t.band_margin >= 0.0 && t.band_margin < 0.5) {
-            return Err(E::new("retune.band_margin", "must be in [0, 0.5)"));
-        }
-        pos(t.settle_window_s, "retune.settle_window_s")?;
-        pos(t.settle_tol, "retune.settle_tol")?;
-        nonneg(t.lock_min_um, "retune.lock_min_um")?;
-        nonneg(t.lock_lost_s, "retune.lock_lost_s")?;
-        nonneg(t.min_interval_s, "retune.min_interval_s")?;
         Ok(())
     }
 
-    /// Validates and builds the runtime estimator in precision `T`.
-    pub fn build<T: Real>(&self) -> Result<Estimator<T>, ConfigError> {
-        self.validate()?;
-        Ok(Estimator::from_valid_config(self))
-    }
-
-    /// Validates, giving the proof that [`ValidConfig::build`] needs: a caller that embeds
+    /// Validates, giving the proof that `ValidConfig::build` needs: a caller that embeds
     /// the estimator in a larger value (the firmware's `App`) builds it straight into
     /// place instead of moving it out of a `Result` (≈ 5 KB of stack on the chip).
     pub fn validated(&self) -> Result<ValidConfig<'_>, ConfigError> {
@@ -415,7 +353,7 @@ impl Config {
     }
 
     /// The pump frequency the estimator commands before its first sample, Hz
-    /// (= [`Estimator::initial_pump_hz`], without building one).
+    /// (= [`crate::Estimator::initial_pump_hz`], without building one).
     pub fn initial_pump_hz(&self) -> f64 {
         let om_ref = self.pump_centre_hz / (2.0 * self.f0_hz);
         // the estimator's `pump_hz_of(0.0)`: reference + 2 f0 · 0
@@ -432,11 +370,111 @@ impl ValidConfig<'_> {
     pub fn config(&self) -> &Config {
         self.0
     }
+}
 
-    /// Builds the runtime estimator in precision `T` (infallible: validated).
-    #[inline(always)] // built in its caller's destination (stack, docs/firmware.md)
-    pub fn build<T: Real>(self) -> Estimator<T> {
-        Estimator::from_valid_config(self.0)
+impl DitherConfig {
+    /// Checks the dither against the pump centre and the sample rate.
+    #[inline]
+    fn validate(&self, pump_centre_hz: f64, fs_hz: f64) -> Result<(), ConfigError> {
+        let d = self;
+        nonneg(d.pump_hz, "dither.pump_hz")?;
+        if d.pump_hz >= 0.05 * pump_centre_hz {
+            return Err(E::new(
+                "dither.pump_hz",
+                "must be below 5 % of the pump centre",
+            ));
+        }
+        pos(d.freq_hz, "dither.freq_hz")?;
+        if d.freq_hz > fs_hz / 20.0 {
+            return Err(E::new("dither.freq_hz", "must be slow: at most fs_hz/20"));
+        }
+        nonneg(d.start_s, "dither.start_s")?;
+        nonneg(d.taper_s, "dither.taper_s")?;
+        if !(d.scale_frac.is_finite() && (0.0..=0.3).contains(&d.scale_frac)) {
+            return Err(E::new("dither.scale_frac", "must be in [0, 0.3]"));
+        }
+        pos(d.scale_freq_hz, "dither.scale_freq_hz")?;
+        if d.scale_freq_hz > fs_hz / 20.0 {
+            return Err(E::new(
+                "dither.scale_freq_hz",
+                "must be slow: at most fs_hz/20",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl RlsConfig {
+    #[inline]
+    fn validate(&self) -> Result<(), ConfigError> {
+        let r = self;
+        if !(r.forgetting > 0.0 && r.forgetting <= 1.0) {
+            return Err(E::new("rls.forgetting", "must be in (0, 1]"));
+        }
+        pos(r.p0, "rls.p0")?;
+        pos(r.p_reset, "rls.p_reset")?;
+        if !(r.trace_bound_factor.is_finite() && r.trace_bound_factor >= 1.0) {
+            return Err(E::new("rls.trace_bound_factor", "must be finite and >= 1"));
+        }
+        nonneg(r.relinearize_s, "rls.relinearize_s")
+    }
+}
+
+impl MonitorConfig {
+    #[inline]
+    fn validate(&self) -> Result<(), ConfigError> {
+        let m = self;
+        nonneg(m.gate_startup_s, "monitor.gate_startup_s")?;
+        nonneg(m.gate_jump_s, "monitor.gate_jump_s")?;
+        nonneg(m.bad_input_gate_s, "monitor.bad_input_gate_s")?;
+        pos(m.change_threshold, "monitor.change_threshold")?;
+        if !(m.change_alpha > 0.0 && m.change_alpha <= 1.0) {
+            return Err(E::new("monitor.change_alpha", "must be in (0, 1]"));
+        }
+        nonneg(m.change_hold_s, "monitor.change_hold_s")?;
+        pos(m.full_scale_um, "monitor.full_scale_um")?;
+        pos(m.accel_full_scale_mps2, "monitor.accel_full_scale_mps2")?;
+        nonneg(m.excitation_min_fraction, "monitor.excitation_min_fraction")
+    }
+}
+
+impl RetuneConfig {
+    #[inline]
+    fn validate(&self) -> Result<(), ConfigError> {
+        let t = self;
+        pos(t.ramp_s, "retune.ramp_s")?;
+        pos(t.max_rate_hz_per_s, "retune.max_rate_hz_per_s")?;
+        nonneg(t.deadband_hz, "retune.deadband_hz")?;
+        if !(t.band_margin >= 0.0 && t.band_margin < 0.5) {
+            return Err(E::new("retune.band_margin", "must be in [0, 0.5)"));
+        }
+        pos(t.settle_window_s, "retune.settle_window_s")?;
+        pos(t.settle_tol, "retune.settle_tol")?;
+        nonneg(t.lock_min_um, "retune.lock_min_um")?;
+        nonneg(t.lock_lost_s, "retune.lock_lost_s")?;
+        nonneg(t.min_interval_s, "retune.min_interval_s")
+    }
+}
+
+use ConfigError as E;
+
+// The checks are out-of-line functions, not closures inlined at every call (each
+// inlined f64 test was ~100 bytes of soft-float calls in the firmware image).
+#[inline(never)]
+fn pos(v: f64, f: &'static str) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(E::new(f, "must be finite and > 0"))
+    }
+}
+
+#[inline(never)]
+fn nonneg(v: f64, f: &'static str) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(E::new(f, "must be finite and >= 0"))
     }
 }
 
@@ -478,3 +516,6 @@ impl fmt::Display for ConfigError {
         )
     }
 }
+
+#[cfg(test)]
+mod tests;

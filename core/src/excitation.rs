@@ -61,8 +61,9 @@ impl Ramp {
     }
 }
 
-/// Pump scheduler state.
-#[derive(Clone, Copy, Debug)]
+/// Pump scheduler state (`Default`: centre 0, no dither, no ramp, until built by
+/// [`Scheduler::new`]).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Scheduler<T> {
     /// Reference ω (non-dimensional), f64.
     pub om_ref: f64,
@@ -99,28 +100,6 @@ fn advance<T: Real>(z: (T, T), r: (T, T)) -> (T, T) {
 }
 
 impl<T: Real> Scheduler<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        Scheduler {
-            om_ref: 0.0,
-            centre: 0.0,
-            ramp: None,
-            dither_amp: T::ZERO,
-            dither_z: (T::ONE, T::ZERO),
-            dither_rot: (T::ONE, T::ZERO),
-            dither_on: false,
-            env: T::ZERO,
-            env_step: T::ZERO,
-            dither_start_k: 0,
-            scale_amp: T::ZERO,
-            scale_z: (T::ONE, T::ZERO),
-            scale_rot: (T::ONE, T::ZERO),
-            scale_cmd: T::ONE,
-        }
-    }
-
     /// `om_ref` the reference ω; dither amplitude (ω units), frequency (cycles per
     /// sample), taper length (samples), start sample, enabled.
     #[inline(never)] // set-up only: its own frame (the chip's stack)

@@ -18,8 +18,9 @@ use crate::real::Real;
 /// Synthesis points per period.
 pub const NSYN: usize = 32;
 
-/// Precomputed trigonometric tables for the synthesis.
-#[derive(Clone, Copy, Debug)]
+/// Precomputed trigonometric tables for the synthesis (built by [`SynthTables::new`];
+/// `Default` is all zero, the placeholder of a design not built yet).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct SynthTables<T> {
     c1: [T; NSYN],
     s1: [T; NSYN],
@@ -30,20 +31,6 @@ pub struct SynthTables<T> {
 }
 
 impl<T: Real> SynthTables<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        SynthTables {
-            c1: [T::ZERO; NSYN],
-            s1: [T::ZERO; NSYN],
-            c2: [T::ZERO; NSYN],
-            s2: [T::ZERO; NSYN],
-            c3: [T::ZERO; NSYN],
-            s3: [T::ZERO; NSYN],
-        }
-    }
-
     /// Builds the tables (design time).
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new() -> Self {
@@ -62,12 +49,6 @@ impl<T: Real> SynthTables<T> {
             (t.c3[j], t.s3[j]) = T::design_cos_sin(3.0 * ph);
         }
         t
-    }
-}
-
-impl<T: Real> Default for SynthTables<T> {
-    fn default() -> Self {
-        Self::new()
     }
 }
 

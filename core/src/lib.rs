@@ -7,9 +7,22 @@
 //! parametric excitation, coupling, angular rate) and retunes the pump so that it sits at
 //! twice the sense-mode natural frequency.
 //!
-//! One algorithm per module; [`config::Config::build`] validates the SI settings once and
-//! returns the runtime [`estimator::Estimator`], whose [`estimator::Estimator::step`]
-//! cannot fail. The same code runs in `f32` on the chip and in `f64` on the host.
+//! One concept per module; `lib.rs` only re-exports. [`config::Config::build`] validates
+//! the SI settings once and returns the runtime [`estimator::Estimator`] (a design built
+//! once plus a small state), whose [`estimator::Estimator::step`] cannot fail. The same
+//! code runs in `f32` on the chip and in `f64` on the host.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`config`] | SI settings, validation ([`ValidConfig`]) |
+//! | [`sample`] | one sample's inputs ([`Sample`], [`Lockin`]) |
+//! | [`physics`] | Table 2, ω0, L0, θ ↔ physical parameters, rate |
+//! | [`lpf`], [`harmonics`], [`svf`], [`rows`] | replica low-pass, projections, slow filters, regression rows |
+//! | [`rls`] | Bierman-UD recursive least squares |
+//! | [`monitor`] | input checks, change detector, excitation, settle test |
+//! | [`excitation`], [`retune`] | pump scheduler (dither, ramps), retune supervisor |
+//! | [`health`], [`output`] | [`Health`], [`Counters`], [`StepOutput`] and its events |
+//! | [`estimator`] | the design, the state and the one `step()` that ties the stages |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -21,17 +34,23 @@ pub mod config;
 pub mod estimator;
 pub mod excitation;
 pub mod harmonics;
+pub mod health;
 pub mod lpf;
 pub mod monitor;
+pub mod output;
 pub mod physics;
 pub mod real;
 pub mod retune;
 pub mod rls;
 pub mod rows;
+pub mod sample;
 pub mod svf;
 
 pub use complex::Cplx;
 pub use config::{Config, ConfigError, ValidConfig};
-pub use estimator::{Counters, Estimator, Health, Lockin, Sample, StepOutput};
+pub use estimator::Estimator;
+pub use health::{Counters, Health};
+pub use output::StepOutput;
 pub use physics::Physical;
 pub use real::Real;
+pub use sample::{Lockin, Sample};

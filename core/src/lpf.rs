@@ -198,8 +198,9 @@ pub fn foh_discretise(sys: &Analog, ts: f64) -> FohDiscrete {
     d
 }
 
-/// Runtime coefficients of the replica filter in the estimator's precision.
-#[derive(Clone, Copy, Debug)]
+/// Runtime coefficients of the replica filter in the estimator's precision (`Default`:
+/// order 0, all zero, the placeholder of a design not built yet).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct ReplicaCoeffs<T> {
     n: usize,
     phi: [[T; MAX_ORDER]; MAX_ORDER],
@@ -216,22 +217,6 @@ pub struct ReplicaCoeffs<T> {
 }
 
 impl<T: Real> ReplicaCoeffs<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        ReplicaCoeffs {
-            n: 0,
-            phi: [[T::ZERO; MAX_ORDER]; MAX_ORDER],
-            g0: [T::ZERO; MAX_ORDER],
-            g1: [T::ZERO; MAX_ORDER],
-            c: [T::ZERO; MAX_ORDER],
-            ca: [T::ZERO; MAX_ORDER],
-            cb: T::ZERO,
-            rest_unit: [T::ZERO; MAX_ORDER],
-        }
-    }
-
     /// Designs the replica of an order-`order` Butterworth with cut-off `wc` (rad per
     /// time unit), sampled every `ts` time units.
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)

@@ -15,6 +15,10 @@
 //! * **Settled.** ω̂y² moved less than a relative tolerance over a window.
 
 use crate::real::Real;
+use crate::sample::Sample;
+use heapless::HistoryBuf;
+
+pub use crate::sample::N_LOCKIN_CH;
 
 /// Outcome of the input check.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -32,42 +36,71 @@ impl InputCheck {
     pub fn ok(&self) -> bool {
         !(self.non_finite || self.saturated || self.stuck)
     }
+
+    /// Checks one sample: every lock-in channel and the accelerometer finite and inside
+    /// its full scale, the pump frequency finite and positive, the pump scale finite and
+    /// ≥ 0; then (only for a finite sample) feeds the stuck detector.
+    #[inline]
+    pub fn of<T: Real>(
+        s: &Sample<T>,
+        limits: &InputLimits<T>,
+        stuck: &mut StuckDetector<T>,
+    ) -> InputCheck {
+        let ch = s.lockin.channels();
+        let mut c = InputCheck::default();
+        let fs = limits.full_scale_um;
+        let afs = limits.accel_full_scale_mps2;
+        for v in ch.iter() {
+            if !v.is_finite() {
+                c.non_finite = true;
+            } else if v.abs() >= fs {
+                c.saturated = true;
+            }
+        }
+        for v in s.accel_mps2.iter() {
+            if !v.is_finite() {
+                c.non_finite = true;
+            } else if v.abs() >= afs {
+                c.saturated = true;
+            }
+        }
+        if !(s.pump_hz.is_finite()
+            && s.pump_hz > 0.0
+            && s.pump_scale.is_finite()
+            && s.pump_scale >= T::ZERO)
+        {
+            c.non_finite = true;
+        }
+        if !c.non_finite && stuck.push(limits.stuck_samples, &ch) {
+            c.stuck = true;
+        }
+        c
+    }
 }
 
-/// Number of lock-in channels checked for stuck values (X0, A1..3 re/im, Y0, B1..3 re/im).
-pub const N_LOCKIN_CH: usize = 14;
+/// The limits of the input check (design: from `monitor.*` of the configuration).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct InputLimits<T> {
+    /// A lock-in channel at or beyond ±this is saturated, µm.
+    pub full_scale_um: T,
+    /// An accelerometer channel at or beyond ±this is saturated, m/s².
+    pub accel_full_scale_mps2: T,
+    /// Repeats of the same value that make a lock-in channel stuck (0 disables).
+    pub stuck_samples: u32,
+}
 
 /// Stuck-channel detector: counts repeats of the exact same value per channel.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct StuckDetector<T> {
     last: [T; N_LOCKIN_CH],
     repeats: [u32; N_LOCKIN_CH],
-    limit: u32,
 }
 
 impl<T: Real> StuckDetector<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        StuckDetector {
-            last: [T::ZERO; N_LOCKIN_CH],
-            repeats: [0; N_LOCKIN_CH],
-            limit: 0,
-        }
-    }
-
-    /// `limit` repeats make a channel stuck (0 disables).
-    pub fn new(limit: u32) -> Self {
-        StuckDetector {
-            last: [T::ZERO; N_LOCKIN_CH],
-            repeats: [0; N_LOCKIN_CH],
-            limit,
-        }
-    }
-    /// Feeds one sample's channels; true if any is stuck.
-    pub fn push(&mut self, ch: &[T; N_LOCKIN_CH]) -> bool {
-        if self.limit == 0 {
+    /// Feeds one sample's channels; true if any repeated its value `limit` times
+    /// (`limit` 0 disables the detector).
+    pub fn push(&mut self, limit: u32, ch: &[T; N_LOCKIN_CH]) -> bool {
+        if limit == 0 {
             return false;
         }
         let mut stuck = false;
@@ -78,7 +111,7 @@ impl<T: Real> StuckDetector<T> {
                 self.repeats[i] = 0;
                 self.last[i] = ch[i];
             }
-            if self.repeats[i] >= self.limit {
+            if self.repeats[i] >= limit {
                 stuck = true;
             }
         }
@@ -86,40 +119,39 @@ impl<T: Real> StuckDetector<T> {
     }
 }
 
-/// The innovation change detector of one axis.
-#[derive(Clone, Copy, Debug)]
-pub struct ChangeDetector<T> {
-    level: T,
+/// Design of the change detector (shared by both axes).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ChangeDesign<T> {
     nominal: T,
     alpha: T,
     threshold: T,
     hold: u64,
-    last_alarm: Option<u64>,
 }
 
-impl<T: Real> ChangeDetector<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        ChangeDetector {
-            level: T::ZERO,
-            nominal: T::ZERO,
-            alpha: T::ZERO,
-            threshold: T::ZERO,
-            hold: 0,
-            last_alarm: None,
-        }
-    }
-
+impl<T: Real> ChangeDesign<T> {
     /// `nominal` level (number of rows), EWMA weight, threshold, hold (samples).
     pub fn new(nominal: f64, alpha: f64, threshold: f64, hold: u64) -> Self {
-        ChangeDetector {
-            level: T::from_f64(nominal),
+        ChangeDesign {
             nominal: T::from_f64(nominal),
             alpha: T::from_f64(alpha),
             threshold: T::from_f64(threshold),
             hold,
+        }
+    }
+}
+
+/// The innovation change detector of one axis (state; its design is a [`ChangeDesign`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ChangeDetector<T> {
+    level: T,
+    last_alarm: Option<u64>,
+}
+
+impl<T: Real> ChangeDetector<T> {
+    /// At the nominal level, no alarm yet.
+    pub fn new(d: &ChangeDesign<T>) -> Self {
+        ChangeDetector {
+            level: d.nominal,
             last_alarm: None,
         }
     }
@@ -129,18 +161,18 @@ impl<T: Real> ChangeDetector<T> {
     }
     /// Feeds the sum of one sample's normalised squared innovations; true on alarm
     /// (the level then restarts at nominal).
-    pub fn push(&mut self, k: u64, sum_norm_sq: T) -> bool {
+    pub fn push(&mut self, d: &ChangeDesign<T>, k: u64, sum_norm_sq: T) -> bool {
         if !sum_norm_sq.is_finite() {
             return false;
         }
-        self.level += self.alpha * (sum_norm_sq - self.level);
+        self.level += d.alpha * (sum_norm_sq - self.level);
         let free = match self.last_alarm {
             None => true,
-            Some(a) => k >= a + self.hold,
+            Some(a) => k >= a + d.hold,
         };
-        if self.level > self.threshold && free {
+        if self.level > d.threshold && free {
             self.last_alarm = Some(k);
-            self.level = self.nominal;
+            self.level = d.nominal;
             return true;
         }
         false
@@ -150,44 +182,24 @@ impl<T: Real> ChangeDetector<T> {
         self.last_alarm
     }
     /// Back to nominal (e.g. after a commanded jump).
-    pub fn rearm(&mut self) {
-        self.level = self.nominal;
+    pub fn rearm(&mut self, d: &ChangeDesign<T>) {
+        self.level = d.nominal;
     }
 }
 
-/// rms of a signal about its running mean (EWMA with weight `alpha`).
-#[derive(Clone, Copy, Debug)]
+/// rms of a signal about its running mean (EWMA; the weight is the caller's design).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct ExcitationMeter<T> {
     mean: T,
     var: T,
-    alpha: T,
 }
 
 impl<T: Real> ExcitationMeter<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        ExcitationMeter {
-            mean: T::ZERO,
-            var: T::ZERO,
-            alpha: T::ZERO,
-        }
-    }
-
-    /// EWMA weight per sample.
-    pub fn new(alpha: f64) -> Self {
-        ExcitationMeter {
-            mean: T::ZERO,
-            var: T::ZERO,
-            alpha: T::from_f64(alpha),
-        }
-    }
-    /// Feeds one value; returns the current variance.
-    pub fn push(&mut self, v: T) -> T {
-        self.mean += self.alpha * (v - self.mean);
+    /// Feeds one value with EWMA weight `alpha`; returns the current variance.
+    pub fn push(&mut self, alpha: T, v: T) -> T {
+        self.mean += alpha * (v - self.mean);
         let d = v - self.mean;
-        self.var += self.alpha * (d * d - self.var);
+        self.var += alpha * (d * d - self.var);
         self.var
     }
     /// Current rms.
@@ -196,92 +208,76 @@ impl<T: Real> ExcitationMeter<T> {
     }
 }
 
-/// Capacity of the settle window ring.
+/// Capacity of the settle window.
 pub const SETTLE_RING: usize = 16;
 
-/// Settle test on one scalar, sampled at a low rate into a small ring, in the
-/// estimator's precision `T` (the values are `T` in the first place; in `f64` on the chip
-/// it was ~2k soft-float instructions on every 25th tick).
-#[derive(Clone, Copy, Debug)]
-pub struct SettleTest<T> {
-    ring: [T; SETTLE_RING],
-    len: usize,
-    pos: usize,
+/// Design of the settle test: one value kept every `every` samples; settled when the
+/// last `need` (2..=16) values span less than `tol` relative.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SettleDesign<T> {
     every: u64,
     need: usize,
     tol: T,
+}
+
+impl<T: Real> SettleDesign<T> {
+    /// Keeps one value every `every` samples; settled when the last `need` (≤ 16)
+    /// values span less than `tol` relative.
+    pub fn new(every: u64, need: usize, tol: f64) -> Self {
+        SettleDesign {
+            every: every.max(1),
+            need: need.clamp(2, SETTLE_RING),
+            tol: T::from_f64(tol),
+        }
+    }
+}
+
+/// Settle test on one scalar, sampled at a low rate into a `heapless::HistoryBuf`, in
+/// the estimator's precision `T` (the values are `T` in the first place; in `f64` on
+/// the chip it was ~2k soft-float instructions on every 25th tick).
+#[derive(Clone, Debug, Default)]
+pub struct SettleTest<T> {
+    window: HistoryBuf<T, SETTLE_RING>,
     /// The verdict, recomputed when a value is pushed (the tick only reads it).
     verdict: bool,
 }
 
 impl<T: Real> SettleTest<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        SettleTest {
-            ring: [T::ZERO; SETTLE_RING],
-            len: 0,
-            pos: 0,
-            every: 1,
-            need: 1,
-            tol: T::ZERO,
-            verdict: false,
-        }
-    }
-
-    /// Keeps one value every `every` samples; settled when the last `need` (≤ 16)
-    /// values span less than `tol` relative.
-    pub fn new(every: u64, need: usize, tol: f64) -> Self {
-        SettleTest {
-            ring: [T::ZERO; SETTLE_RING],
-            len: 0,
-            pos: 0,
-            every: every.max(1),
-            need: need.clamp(2, SETTLE_RING),
-            tol: T::from_f64(tol),
-            verdict: false,
-        }
-    }
     /// Forgets the history.
     pub fn clear(&mut self) {
-        self.len = 0;
-        self.pos = 0;
+        self.window.clear();
         self.verdict = false;
     }
     /// Feeds the value at sample `k`.
-    pub fn push(&mut self, k: u64, v: T) {
-        if !k.is_multiple_of(self.every) {
+    pub fn push(&mut self, d: &SettleDesign<T>, k: u64, v: T) {
+        if !k.is_multiple_of(d.every) {
             return;
         }
         if !v.is_finite() {
             self.clear();
             return;
         }
-        self.ring[self.pos] = v;
-        self.pos = (self.pos + 1) % SETTLE_RING;
-        self.len = (self.len + 1).min(SETTLE_RING);
-        self.verdict = self.evaluate();
+        self.window.write(v);
+        self.verdict = self.evaluate(d);
     }
     /// Settled now.
     pub fn settled(&self) -> bool {
         self.verdict
     }
-    fn evaluate(&self) -> bool {
-        if self.len < self.need {
+    fn evaluate(&self, d: &SettleDesign<T>) -> bool {
+        if self.window.len() < d.need {
             return false;
         }
         // finite values only (push clears on a non-finite one), so `Real::min/max` agree
-        // with `f64::min/max`
+        // with `f64::min/max`, and the span does not depend on the order
         let mut lo = T::MAX;
         let mut hi = -T::MAX;
-        for i in 0..self.need {
-            let idx = (self.pos + SETTLE_RING - 1 - i) % SETTLE_RING;
-            lo = lo.min(self.ring[idx]);
-            hi = hi.max(self.ring[idx]);
+        for v in self.window.oldest_ordered().rev().take(d.need) {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
         }
         let scale = hi.abs().max(lo.abs()).max(T::from_f64(1e-30));
-        (hi - lo) / scale < self.tol
+        (hi - lo) / scale < d.tol
     }
 }
 
@@ -310,14 +306,15 @@ mod tests {
     #[test]
     fn change_detector_quiet_on_noise_fires_on_step() {
         let mut s = 7u64;
-        let mut d = ChangeDetector::<f64>::new(5.0, 0.05, 1e3, 25);
+        let dd = ChangeDesign::<f64>::new(5.0, 0.05, 1e3, 25);
+        let mut d = ChangeDetector::new(&dd);
         for k in 0..100_000u64 {
-            assert!(!d.push(k, noise_sum(&mut s)), "false alarm at {k}");
+            assert!(!d.push(&dd, k, noise_sum(&mut s)), "false alarm at {k}");
         }
         // a parameter change: innovations 30σ on every row → sum ≈ 5·900
         let mut fired = None;
         for k in 100_000..100_100u64 {
-            if d.push(k, noise_sum(&mut s) + 5.0 * 900.0) {
+            if d.push(&dd, k, noise_sum(&mut s) + 5.0 * 900.0) {
                 fired = Some(k);
                 break;
             }
@@ -328,13 +325,13 @@ mod tests {
 
     #[test]
     fn stuck_detector() {
-        let mut d = StuckDetector::<f32>::new(5);
+        let mut d = StuckDetector::<f32>::default();
         let mut ch = [0.0f32; N_LOCKIN_CH];
         for k in 0..100 {
             for (i, c) in ch.iter_mut().enumerate() {
                 *c = (k * 31 + i) as f32;
             }
-            assert!(!d.push(&ch));
+            assert!(!d.push(5, &ch));
         }
         // channel 3 freezes
         let mut hit = 0;
@@ -344,29 +341,35 @@ mod tests {
                     *c = (k * 31 + i) as f32;
                 }
             }
-            if d.push(&ch) {
+            if d.push(5, &ch) {
                 hit = k;
                 break;
             }
         }
         assert_eq!(hit, 104, "the 5th repeat of the frozen value");
-        assert!(!StuckDetector::<f32>::new(0).push(&ch));
+        assert!(!StuckDetector::<f32>::default().push(0, &ch));
     }
 
     #[test]
     fn settle_and_excitation() {
-        let mut st = SettleTest::<f64>::new(50, 6, 2e-5);
+        let sd = SettleDesign::<f64>::new(50, 6, 2e-5);
+        let mut st = SettleTest::default();
         for k in 0..300u64 {
-            st.push(k, 1.03 + 1e-3 * (-(k as f64) / 20.0).exp());
+            st.push(&sd, k, 1.03 + 1e-3 * (-(k as f64) / 20.0).exp());
         }
         assert!(!st.settled());
         for k in 300..1000u64 {
-            st.push(k, 1.03 + 1e-7 * (k as f64 * 0.1).sin());
+            st.push(&sd, k, 1.03 + 1e-7 * (k as f64 * 0.1).sin());
         }
         assert!(st.settled());
-        let mut m = ExcitationMeter::<f64>::new(0.004);
+        st.clear();
+        assert!(!st.settled());
+        let mut m = ExcitationMeter::<f64>::default();
         for k in 0..5000 {
-            m.push(1e-3 * (2.0 * core::f64::consts::PI * 2.0 * k as f64 / 500.0).sin());
+            m.push(
+                0.004,
+                1e-3 * (2.0 * core::f64::consts::PI * 2.0 * k as f64 / 500.0).sin(),
+            );
         }
         let r = m.rms();
         assert!((r - 1e-3 / 2f64.sqrt()).abs() < 1e-4, "rms {r}");

@@ -57,8 +57,21 @@
 use core::f64::consts::PI;
 
 /// Drive natural frequency implied by Table 2: ω0 = 2.618/3.8581e-5 ≈ 67 858 rad/s
-/// (10.80 kHz), chosen so that γ = 3.8581e-5 is 150 °/s.
+/// (10.80 kHz), chosen so that γ = 3.8581e-5 is 150 °/s. The one definition of ω0 in
+/// the workspace: the configuration ([`crate::Config::table2`]) and the simulator
+/// derive from it.
 pub const OMEGA0_TABLE2_RAD_S: f64 = 2.618 / 3.8581e-5;
+
+/// ω0/2π of Table 2 (≈ 10 799.8 Hz): the configuration's `f0_hz`.
+pub const F0_TABLE2_HZ: f64 = OMEGA0_TABLE2_RAD_S / (2.0 * PI);
+
+/// The length unit L0 of the non-dimensional model (the paper's 1 µm), in µm: the
+/// configuration's `l0_um`.
+pub const L0_TABLE2_UM: f64 = 1.0;
+
+/// The length unit L0 in metres (1e-6 m), for SI conversions such as
+/// `a = ã · L0 · ω0²`.
+pub const L0_TABLE2_M: f64 = 1e-6;
 
 /// Physical parameters of eq. (6), non-dimensional (units of ω0 and L0).
 ///
@@ -441,6 +454,10 @@ mod tests {
     #[test]
     fn rate_150_dps_is_table2_gamma() {
         assert_eq!(OMEGA0_TABLE2_RAD_S, 2.618 / 3.8581e-5);
+        // the constants are the runtime expressions, bit for bit
+        let (w0, two_pi) = (std::hint::black_box(OMEGA0_TABLE2_RAD_S), 2.0 * PI);
+        assert_eq!(F0_TABLE2_HZ.to_bits(), (w0 / two_pi).to_bits());
+        assert_eq!(L0_TABLE2_M, L0_TABLE2_UM * 1e-6);
         let r = rate_dps_from_gamma(3.8581e-5, OMEGA0_TABLE2_RAD_S);
         // 2.618 rad/s = 150.0002 °/s (2.618 is 150 °/s to the 4 printed digits)
         assert!((r - 2.618 * 180.0 / PI).abs() < 1e-12, "{r}");

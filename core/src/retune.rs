@@ -63,8 +63,8 @@ pub enum RetuneAction {
     },
 }
 
-/// Supervisor state.
-#[derive(Clone, Copy, Debug)]
+/// Supervisor state (`Default`: disabled, unlocked, until built by [`Supervisor::new`]).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Supervisor<T> {
     /// Retune allowed.
     pub enabled: bool,
@@ -126,29 +126,6 @@ pub struct RetuneInputs<T> {
 }
 
 impl<T: Real> Supervisor<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        Supervisor {
-            enabled: false,
-            ramp_min: 1,
-            max_rate: 0.0,
-            deadband: 0.0,
-            deadband_t: T::ZERO,
-            margin: T::ZERO,
-            min_interval: 0,
-            lock_min: T::ZERO,
-            lock_lost_after: 0,
-            below_since: None,
-            locked: false,
-            ramping: None,
-            last_end: None,
-            retunes: 0,
-            last_target: 0.0,
-        }
-    }
-
     /// A supervisor with these settings.
     pub fn new(s: SupervisorSettings) -> Self {
         Supervisor {

@@ -75,8 +75,9 @@ pub struct RowSet<T> {
     pub sense_y: [T; NROWS],
 }
 
-/// The nominal θ and the derived constants the rows need, in `T`.
-#[derive(Clone, Copy, Debug)]
+/// The nominal θ (the linearisation point) and the derived constants the rows need, in
+/// `T`. State, not design: re-linearisation moves it.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct NominalConsts<T> {
     th1: [T; 8],
     th2: [T; 6],
@@ -87,18 +88,6 @@ pub struct NominalConsts<T> {
 }
 
 impl<T: Real> NominalConsts<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        NominalConsts {
-            th1: [T::ZERO; 8],
-            th2: [T::ZERO; 6],
-            c12: [T::ZERO; 3],
-            c22: [T::ZERO; 3],
-        }
-    }
-
     /// From the nominal θ (f64) and the reference ω.
     pub fn new(th1: &[f64; 8], th2: &[f64; 6], om_ref: f64) -> Self {
         let mut t1 = [T::ZERO; 8];
@@ -183,11 +172,30 @@ struct DcInputs<T> {
     vy: T,
 }
 
-/// The state-variable filter bank and row builder.
-#[derive(Clone, Copy, Debug)]
-pub struct RowBuilder<T> {
+/// The design of the row builder: the slow state-variable filter's coefficients and the
+/// synthesis tables of the harmonic projections (built once; `Default` is the all-zero
+/// placeholder of an estimator that is not designed yet).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RowDesign<T> {
     svf: SvfCoeffs<T>,
     tables: SynthTables<T>,
+}
+
+impl<T: Real> RowDesign<T> {
+    /// For SVF corner `w` (rad/τ) and sample period `ts` (τ).
+    #[inline(never)] // set-up only: its own frame (the chip's stack)
+    pub fn new(w: f64, ts: f64) -> Self {
+        RowDesign {
+            svf: SvfCoeffs::new(w, ts),
+            tables: SynthTables::new(),
+        }
+    }
+}
+
+/// The state of the row builder: the state-variable filter bank and the linearisation
+/// point (its design is a [`RowDesign`]). `Default`: not started, zero nominal.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RowBuilder<T> {
     nom: NominalConsts<T>,
     h: [HarmFilters<T>; 2],
     dc: DcFilters<T>,
@@ -195,26 +203,9 @@ pub struct RowBuilder<T> {
 }
 
 impl<T: Real> RowBuilder<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
+    /// Filters that start at rest at the first sample, linearised about `nom`.
+    pub fn new(nom: NominalConsts<T>) -> Self {
         RowBuilder {
-            svf: SvfCoeffs::blank(),
-            tables: SynthTables::blank(),
-            nom: NominalConsts::blank(),
-            h: [HarmFilters::default(); 2],
-            dc: DcFilters::default(),
-            started: false,
-        }
-    }
-
-    /// A builder for SVF corner `w` (rad/τ), sample period `ts` (τ), nominal constants.
-    #[inline(never)] // set-up only: its own frame (the chip's stack)
-    pub fn new(w: f64, ts: f64, nom: NominalConsts<T>) -> Self {
-        RowBuilder {
-            svf: SvfCoeffs::new(w, ts),
-            tables: SynthTables::new(),
             nom,
             h: [HarmFilters::default(); 2],
             dc: DcFilters::default(),
@@ -380,9 +371,15 @@ impl<T: Real> RowBuilder<T> {
     /// Feeds one sample; writes its rows into `rows` (every entry is overwritten, so
     /// the caller's buffer needs no clearing: no 320-byte zeroing and copy per tick).
     #[inline(never)]
-    pub fn push(&mut self, e: &Envelopes<T>, kn: &Known<T>, rows: &mut RowSet<T>) {
-        let px = project(&self.tables, e.x0, &e.a, true);
-        let py = project(&self.tables, e.y0, &e.b, false);
+    pub fn push(
+        &mut self,
+        design: &RowDesign<T>,
+        e: &Envelopes<T>,
+        kn: &Known<T>,
+        rows: &mut RowSet<T>,
+    ) {
+        let px = project(&design.tables, e.x0, &e.a, true);
+        let py = project(&design.tables, e.y0, &e.b, false);
         let hin = [
             self.harm_inputs(1, e, kn, &px, &py),
             self.harm_inputs(3, e, kn, &px, &py),
@@ -414,7 +411,7 @@ impl<T: Real> RowBuilder<T> {
             d.vy = SvfState::at_rest(din.vy);
             self.started = true;
         }
-        let c = self.svf;
+        let c = design.svf;
         let n = self.nom;
 
         // ---- DC rows (row 0)

@@ -32,8 +32,9 @@
 use crate::complex::Cplx;
 use crate::real::Real;
 
-/// FOH-exact coefficients of the ζ = 1 state-variable filter.
-#[derive(Clone, Copy, Debug)]
+/// FOH-exact coefficients of the ζ = 1 state-variable filter (`Default`: all zero, the
+/// placeholder of a design not built yet, whose outputs are zero).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct SvfCoeffs<T> {
     a: T,
     one_minus_a: T,
@@ -48,22 +49,6 @@ pub struct SvfCoeffs<T> {
 }
 
 impl<T: Real> SvfCoeffs<T> {
-    /// A placeholder with no design (all zero), built in place by
-    /// [`crate::Estimator::blank`]; never used before it is rebuilt.
-    #[inline(always)]
-    pub(crate) fn blank() -> Self {
-        SvfCoeffs {
-            a: T::ZERO,
-            one_minus_a: T::ZERO,
-            ha: T::ZERO,
-            c2: T::ZERO,
-            g1: T::ZERO,
-            g2: T::ZERO,
-            w: T::ZERO,
-            w2: T::ZERO,
-        }
-    }
-
     /// Coefficients for corner `w` (rad per time unit) sampled every `ts` time units.
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
     pub fn new(w: f64, ts: f64) -> Self {

@@ -1,0 +1,350 @@
+//! The stages of one step, in order (each reads the design, changes the state):
+//!
+//! 1. **condition** the sample: check it, convert it to the model's units, or flag,
+//!    count and skip it (the last valid one is held);
+//! 2. **known signals**: the commanded pump and the accelerations through the replica
+//!    of the lock-in low-pass;
+//! 3. **rows**: projections, the state-variable filter bank, 5 + 5 rows (`rows`);
+//! 4. **update** both RLS (unless gated) and run the change detectors;
+//! 5. **assess**: settle test, re-linearisation, health;
+//! 6. **retune**: the supervisor's decision and the scheduler's ramps;
+//! 7. **command** the next pump.
+//!
+//! Every stage is inlined into the one `step()` frame (the chip's stack and cost).
+
+use super::design::{DECIDE_EVERY, Design};
+use super::state::{Conditioned, Replicas, State};
+use crate::health::Health;
+use crate::lpf::ReplicaChannel;
+use crate::monitor::InputCheck;
+use crate::output::{StepOutput, event};
+use crate::real::Real;
+use crate::retune::{RetuneAction, RetuneInputs, drive_band};
+use crate::rows::{Envelopes, Known, NROWS};
+use crate::sample::Sample;
+
+impl<T: Real> State<T> {
+    /// One 500 Hz sample through the stages (module docs).
+    #[inline(always)]
+    pub fn step(&mut self, d: &Design<T>, s: &Sample<T>) -> StepOutput {
+        let k = self.k;
+        let mut events = 0u8;
+        self.counters.samples = self.counters.samples.wrapping_add(1);
+        let good = self.condition(d, s, &mut events);
+        // the held input, in locals (not a copy of the whole struct per stage)
+        let Some(Conditioned {
+            env,
+            acc,
+            pump_hz,
+            pump_scale,
+        }) = self.last_good
+        else {
+            return self.hold_centre(d, events);
+        };
+        let exc_var = self.known_signals(d, pump_hz, pump_scale, acc);
+        self.rows
+            .push(&d.rows, &env, &self.last_known, &mut self.last_rows);
+        let gated = k < d.watch.gate_startup || k < self.jump_gate_until || k < self.bad_gate_until;
+        let updated = !gated && good;
+        if updated {
+            self.update(d, k, &mut events);
+        }
+        let wy2 = self.wy2_fast(d);
+        let settled = self.settle(d, k, gated, updated, wy2, &mut events);
+        self.maybe_relinearize(d, k, updated);
+        let health = self.assess(d, good, gated, settled, exc_var, pump_scale);
+        let drive_amp = env.a[0].abs();
+        let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
+        self.health = health;
+        self.command(d, health, events, updated)
+    }
+
+    /// Stage 1: checks the sample; a good one becomes the held input in the model's
+    /// units, a bad one is counted and gates the RLS for `bad_input_gate_s`.
+    #[inline(always)]
+    fn condition(&mut self, d: &Design<T>, s: &Sample<T>, events: &mut u8) -> bool {
+        let chk = InputCheck::of(s, &d.watch.limits, &mut self.stuck);
+        let good = chk.ok();
+        if good {
+            let u = &d.units;
+            let mut env = Envelopes {
+                x0: s.lockin.x0_um * u.inv_l0,
+                y0: s.lockin.y0_um * u.inv_l0,
+                ..Envelopes::default()
+            };
+            for i in 0..3 {
+                env.a[i] = s.lockin.x_um[i].scale(u.inv_l0);
+                env.b[i] = s.lockin.y_um[i].scale(u.inv_l0);
+            }
+            let acc = [s.accel_mps2[0] * u.accel_nd, s.accel_mps2[1] * u.accel_nd];
+            self.last_good = Some(Conditioned {
+                env,
+                acc,
+                pump_hz: s.pump_hz,
+                pump_scale: s.pump_scale,
+            });
+        } else {
+            self.counters.bad_samples += 1;
+            self.counters.non_finite += chk.non_finite as u32;
+            self.counters.saturated += chk.saturated as u32;
+            self.counters.stuck += chk.stuck as u32;
+            self.bad_gate_until = self.k + d.watch.gate_bad + 1;
+            *events |= event::BAD_INPUT;
+        }
+        good
+    }
+
+    /// No valid sample yet: hold, keep commanding the centre.
+    #[inline(always)]
+    fn hold_centre(&mut self, d: &Design<T>, events: u8) -> StepOutput {
+        self.k += 1;
+        self.health = Health {
+            inputs_valid: false,
+            ..Health::default()
+        };
+        let dev = self.sched.command(self.k);
+        StepOutput {
+            pump_hz_next: d.units.pump_hz_of(dev),
+            pump_scale_next: self.sched.scale_command(),
+            health: self.health,
+            events,
+            updated: false,
+        }
+    }
+
+    /// Stage 2: the known signals through the replica of the lock-in low-pass; returns
+    /// the excitation meter's variance of the filtered pump-frequency deviation.
+    #[inline(always)]
+    fn known_signals(&mut self, d: &Design<T>, pump_hz: f64, pump_scale: T, acc: [T; 2]) -> T {
+        let u = &d.units;
+        // ω − ω_ref from the small Hz offset: one f64 subtraction, the rest in T keeps
+        // ~1e-10 absolute precision (the offset is at most a few % of the pump)
+        let dev = T::from_f64(pump_hz - u.pump_ref_hz) * u.inv_2f0;
+        let dom = dev;
+        let dom2 = dev * (u.two_om_ref + dev);
+        let ds = pump_scale - T::ONE;
+        // one set of coefficients, borrowed (not copied) every tick
+        let co = &d.replica;
+        let rep = self.rep.get_or_insert_with(|| Replicas {
+            dom: ReplicaChannel::at_rest(co, dom),
+            dom2: ReplicaChannel::at_rest(co, dom2),
+            ds: ReplicaChannel::at_rest(co, ds),
+            ax: ReplicaChannel::at_rest(co, acc[0]),
+            ay: ReplicaChannel::at_rest(co, acc[1]),
+        });
+        // the commanded pump (frequency and scale) follows the generator's profile
+        let hold = u.staircase;
+        let f_dom = rep.dom.update_with(co, dom, hold);
+        let known = Known {
+            om: T::from_f64(u.om_ref) + f_dom,
+            dom2: rep.dom2.update_with(co, dom2, hold),
+            omd: rep.dom.derivative(co),
+            ds: rep.ds.update_with(co, ds, hold),
+            ax: rep.ax.update(co, acc[0]),
+            ay: rep.ay.update(co, acc[1]),
+        };
+        let exc_var = self.exc.push(d.watch.exc_alpha, f_dom);
+        self.last_known = known;
+        exc_var
+    }
+
+    /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns
+    /// scaled by |θ_design|), then the change detectors on the summed normalised
+    /// innovations; an alarm resets that axis' covariance.
+    #[inline(always)]
+    fn update(&mut self, d: &Design<T>, k: u64, events: &mut u8) {
+        let f = &d.fit;
+        self.counters.updates += 1;
+        self.rls1.begin_sample();
+        self.rls2.begin_sample();
+        let rows = &self.last_rows;
+        let mut sum1 = T::ZERO;
+        let mut sum2 = T::ZERO;
+        for r in 0..NROWS {
+            let w = f.w1[r];
+            // built by `from_fn`, not zeroed then filled (no memclr on the tick path)
+            let phi: [T; 8] = core::array::from_fn(|j| rows.drive_phi[r][j] * f.sc1[j] * w);
+            let inn = self.rls1.update(&phi, rows.drive_y[r] * w);
+            sum1 += inn.normalized_sq();
+            let w = f.w2[r];
+            let phi: [T; 6] = core::array::from_fn(|j| rows.sense_phi[r][j] * f.sc2[j] * w);
+            let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
+            sum2 += inn.normalized_sq();
+        }
+        let p = f.p_reset;
+        if self.det1.push(&f.change, k, sum1) {
+            self.rls1.reset_covariance(p);
+            self.counters.resets_drive += 1;
+            *events |= event::CHANGE_DRIVE;
+        }
+        if self.det2.push(&f.change, k, sum2) {
+            self.rls2.reset_covariance(p);
+            self.counters.resets_sense += 1;
+            *events |= event::CHANGE_SENSE;
+        }
+        if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
+            self.last_reset = k;
+            self.change_pending = true;
+            self.settle.clear();
+            self.lift_trace_bound(d);
+        }
+    }
+
+    /// Stage 5a: the settle test on ω̂y²; at the rising edge a pending change is cleared
+    /// and the anti-windup bound learned (a factor over the converged trace, FINDINGS
+    /// §4, anew after every reset: a new regime has another trace).
+    #[inline(always)]
+    fn settle(
+        &mut self,
+        d: &Design<T>,
+        k: u64,
+        gated: bool,
+        updated: bool,
+        wy2: T,
+        events: &mut u8,
+    ) -> bool {
+        if updated {
+            self.settle.push(&d.watch.settle, k, wy2);
+        }
+        let window = d.watch.settle_window;
+        let settled = !gated && self.settle.settled() && k >= self.last_reset + window;
+        if settled && !self.was_settled {
+            *events |= event::SETTLED;
+            self.change_pending = false;
+            if !self.bound_learned {
+                let f = d.cfg.rls.trace_bound_factor;
+                let t1 = T::from_f64(self.rls1.trace().to_f64() * f);
+                let t2 = T::from_f64(self.rls2.trace().to_f64() * f);
+                self.rls1.set_trace_max(t1);
+                self.rls2.set_trace_max(t2);
+                self.bound_learned = true;
+            }
+        }
+        self.was_settled = settled;
+        settled
+    }
+
+    /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
+    /// a moderate estimate.
+    #[inline(always)]
+    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
+        let relin_every = d.fit.relin_every;
+        if relin_every > 0
+            && updated
+            && k >= self.lin.last_relin + relin_every
+            && self.deviation_moderate()
+        {
+            self.relinearize(d);
+            self.lin.last_relin = k;
+        }
+    }
+
+    /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp
+    /// as of before its tick), and the 1 s mean of the pump scale.
+    #[inline(always)]
+    fn assess(
+        &mut self,
+        d: &Design<T>,
+        good: bool,
+        gated: bool,
+        settled: bool,
+        exc_var: T,
+        pump_scale: T,
+    ) -> Health {
+        let excitation_ok = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
+        let (tr1, tr2) = (self.rls1.last_trace(), self.rls2.last_trace());
+        let (lim1, lim2) = (d.fit.lim1, d.fit.lim2);
+        let covariance_bounded = tr1.is_finite()
+            && tr2.is_finite()
+            && tr1 <= lim1
+            && tr2 <= lim2
+            && self.rls1.min_d() > T::ZERO
+            && self.rls2.min_d() > T::ZERO;
+        // mean pump scale (1 s EWMA): the amplitude dither must not make the band guard
+        // wobble with the instantaneous s
+        self.last_s += d.watch.s_alpha * (pump_scale - self.last_s);
+        Health {
+            inputs_valid: good,
+            excitation_ok,
+            covariance_bounded,
+            change_detected: self.change_pending,
+            drive_locked: self.sup.locked(),
+            settled,
+            gated,
+            retuning: self.sup.ramping(),
+        }
+    }
+
+    /// Stage 6: the retune supervisor (`drive_amp` = |A1|, its lock). Decisions every [`DECIDE_EVERY`] samples in `T`
+    /// (module `retune`); lock tracking and ramps every tick. Returns the health with
+    /// the supervisor's lock and ramp after its tick.
+    #[inline(always)]
+    fn retune(
+        &mut self,
+        d: &Design<T>,
+        k: u64,
+        mut health: Health,
+        wy2: T,
+        drive_amp: T,
+        events: &mut u8,
+    ) -> Health {
+        let om_ref = d.units.om_ref;
+        let centre_om = om_ref + self.sched.centre();
+        let decide = k.is_multiple_of(DECIDE_EVERY);
+        let healthy = decide && health.actionable() && k >= self.bad_gate_until;
+        let wy2 = if decide { wy2 } else { T::ZERO };
+        // the band (three square roots) only when a retune is actually in view
+        let band = if decide
+            && self
+                .sup
+                .would_retune(k, healthy, wy2, T::from_f64(centre_om))
+        {
+            drive_band(&self.theta1_t(d), self.last_s)
+        } else {
+            None
+        };
+        let act = self.sup.tick(&RetuneInputs {
+            k,
+            healthy,
+            wy2,
+            band,
+            centre_om,
+            drive_amp,
+            ramp_done: self.sched.ramp().is_none(),
+        });
+        match act {
+            RetuneAction::Start { target_om, len } => {
+                self.sched.ramp_to(target_om - om_ref, k + 1, len);
+                self.counters.retunes += 1;
+                *events |= event::RETUNE_START;
+            }
+            RetuneAction::Abort { back_to_om, len } => {
+                self.sched.ramp_to(back_to_om - om_ref, k + 1, len);
+                self.counters.retune_aborts += 1;
+                *events |= event::RETUNE_ABORT;
+            }
+            RetuneAction::None => {
+                if health.retuning && !self.sup.ramping() {
+                    *events |= event::RETUNE_DONE;
+                }
+            }
+        }
+        health.drive_locked = self.sup.locked();
+        health.retuning = self.sup.ramping();
+        health
+    }
+
+    /// Stage 7: the pump command for the next sample instant.
+    #[inline(always)]
+    fn command(&mut self, d: &Design<T>, health: Health, events: u8, updated: bool) -> StepOutput {
+        self.k += 1;
+        let dev = self.sched.command(self.k);
+        StepOutput {
+            pump_hz_next: d.units.pump_hz_of(dev),
+            pump_scale_next: self.sched.scale_command(),
+            health,
+            events,
+            updated,
+        }
+    }
+}
