@@ -69,7 +69,7 @@
 //! steps/period, FINDINGS §1) therefore never biases this estimator: in the paper's own
 //! noise-free world every error comes from excitation and conditioning.
 //!
-//! # What it shows (measured; [`write_paper_raw_report`], tests/paper_raw.rs)
+//! # What it shows (measured; [`write_paper_raw_summary`], tests/paper_raw.rs)
 //!
 //! * Noise-free, λ = 0.2/τ, estimation from the start-up: all 14 θ within 1 % in ≤ 1 ms and
 //!   1e-12…1e-6 after, rate 150.000 °/s. With 50 ms per parameter set (the paper's figures
@@ -124,9 +124,11 @@ pub use identifiability::{
 };
 pub use ode::RK4_STABILITY_LIMIT;
 pub use records::{physical_of, rel_err, settle_time, theta_rel_errors};
+#[allow(deprecated)]
+pub use report::write_paper_raw_report;
 pub use report::{
     AxisPair, COMPARE_RAW_S, FINE_STEPS_PER_PERIOD, IdentifiabilityReport, LambdaInfo, LateStart,
-    PaperRawSummary, RunNumbers, SwitchRecord, write_paper_raw_report,
+    PaperRawSummary, RunNumbers, SwitchRecord, write_paper_raw_summary,
 };
 pub use simulate::{RawRecord, RawRun, simulate};
 pub use switch::{
