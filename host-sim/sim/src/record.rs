@@ -38,8 +38,9 @@ pub use replay::{
     replay, replay_csv_header, replay_summary, write_replay, write_replay_csv,
 };
 pub use simulate::{
-    DEFAULT_TEMP_PROFILE, EffectSpec, RecordFiles, RecordOptions, SIM_PUMP_AMP_REF_V,
-    simulate_record, simulate_record_with, truth_path, write_simulated_record,
+    DEFAULT_TEMP_PROFILE, EffectSpec, RecordFiles, RecordOptions, RecordTruth, SIM_PUMP_AMP_REF_V,
+    TruthClosedLoop, TruthEvent, TruthLockin, TruthPlant, TruthWhat, TruthXy, simulate_record,
+    simulate_record_with, truth_path, write_simulated_record,
 };
 pub use write::{push_number, write_record, write_record_to};
 

@@ -57,6 +57,16 @@ fn named_map<S: Serializer, V: Serialize>(
     m.end()
 }
 
+/// `serialize_with` spelling of θ1 alone as `{"th11": .., …, "th18": ..}`.
+pub fn theta_drive_named<S: Serializer, V: Serialize>(v: &[V; 8], s: S) -> Result<S::Ok, S::Error> {
+    named_map(s, &THETA_DRIVE_NAMES, v)
+}
+
+/// `serialize_with` spelling of θ2 alone as `{"th21": .., …, "th26": ..}`.
+pub fn theta_sense_named<S: Serializer, V: Serialize>(v: &[V; 6], s: S) -> Result<S::Ok, S::Error> {
+    named_map(s, &THETA_SENSE_NAMES, v)
+}
+
 /// `serialize_with` spelling of a [`ThetaPair`] as one object `{"th11": .., …, "th26": ..}`.
 pub fn theta_flat<S: Serializer, V: Serialize>(p: &ThetaPair<V>, s: S) -> Result<S::Ok, S::Error> {
     let mut m = s.serialize_map(Some(14))?;

@@ -656,7 +656,8 @@ fn record_vs_runner(sc: &Scenario, seed: u64, name: &str) -> f64 {
     assert_eq!(rec.header.f0_hz, sc.sim.f0_hz);
     assert_eq!(rec.header.lockin_lpf_hz, sc.sim.lockin_lpf_hz);
     assert_eq!(rec.header.lockin_lpf_order, sc.sim.lockin_lpf_order);
-    assert_eq!(truth["seed"], seed);
+    assert_eq!(truth.seed, seed);
+    assert_eq!(truth.samples, rec.rows.len());
 
     // through a file, bit-exact
     let dir = scratch(name);
@@ -725,24 +726,32 @@ fn truth_goes_beside_the_csv_never_into_it() {
     assert_eq!(files.csv, out);
     assert_eq!(files.truth, dir.join("sub").join("short.truth.json"));
     assert_eq!(rec.rows.len(), 101);
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&files.truth).unwrap()).unwrap();
-    assert_eq!(truth["scenario"], "identify");
-    assert_eq!(truth["seed"], 1);
-    assert_eq!(truth["record"], "short.csv");
-    assert_eq!(truth["effects"], serde_json::json!([]));
-    assert_eq!(truth["noise_pm_rthz"], 1.0);
-    assert_eq!(truth["lockin"]["lpf_order"], 4);
-    for end in ["plant_start", "plant_end"] {
-        assert_eq!(
-            truth[end]["physical"]["wy2"], 1.0265,
-            "{end}: {}",
-            truth[end]
-        );
-        assert!(truth[end]["theta_drive"]["th11"].is_f64());
-        assert!(truth[end]["theta_sense"]["th26"].is_f64());
+    // the truth file is the typed truth of the same simulation, with the record's name
+    let (_, mut truth) = simulate_record_with(&sc, &RecordOptions::default(), &mut |_| {}).unwrap();
+    assert_eq!(truth.scenario, "identify");
+    assert_eq!(truth.seed, 1);
+    assert!(truth.effects.is_empty() && truth.events.is_empty());
+    assert_eq!(truth.noise_pm_rthz, 1.0);
+    assert_eq!(truth.lockin.lpf_order, 4);
+    for end in [&truth.plant_start, &truth.plant_end] {
+        assert_eq!(end.physical.wy2, 1.0265, "{end:?}");
     }
-    assert!(truth["events"].is_array());
+    truth.record = Some(Some("short.csv".into()));
+    let text = std::fs::read_to_string(&files.truth).unwrap();
+    assert_eq!(
+        text,
+        paragyro_simulator::summary::to_json_pretty(&truth).unwrap()
+    );
+    for key in [
+        "\"record\": \"short.csv\"",
+        "\"format\": \"paragyro-record-truth 1\"",
+        "\"th11\": ",
+        "\"th26\": ",
+        "\"wy2\": 1.0265",
+        "\"events\": []",
+    ] {
+        assert!(text.contains(key), "{key} missing from {text}");
+    }
 
     let text = std::fs::read_to_string(&out).unwrap();
     let cols = text.lines().find(|l| !l.starts_with('#')).unwrap();
@@ -781,8 +790,15 @@ fn truth_path_naming() {
 
 #[test]
 fn unknown_effects_are_rejected_and_known_ones_recorded() {
-    // an unknown effect cannot reach the simulator: its name is rejected when parsed
-    let e = "drive_feedthrough=0.1".parse::<EffectSpec>().unwrap_err();
+    let opts = RecordOptions {
+        effects: vec![EffectSpec {
+            name: "drive_feedthrough".into(),
+            size: 0.1,
+            param: None,
+        }],
+        ..RecordOptions::default()
+    };
+    let e = simulate_record_with(&identify(0.1), &opts, &mut |_| {}).unwrap_err();
     assert!(
         e.to_string().contains("unknown effect 'drive_feedthrough'"),
         "{e}"
@@ -794,8 +810,8 @@ fn unknown_effects_are_rejected_and_known_ones_recorded() {
     };
     let (rec, truth) = simulate_record_with(&identify(0.1), &opts, &mut |_| {}).unwrap();
     assert!(rec.rows.iter().all(|r| r.temp_c.is_some()));
-    assert_eq!(truth["effects"][0]["name"], "thermal_drift");
-    assert_eq!(truth["effects"][0]["size"], -30.0);
+    assert_eq!(truth.effects.len(), 1);
+    assert_eq!(truth.effects[0].to_string(), "thermal_drift=-30");
 }
 
 #[test]
@@ -806,7 +822,7 @@ fn rate_table_writes_the_reference_rate() {
     };
     let (rec, truth) = simulate_record_with(&identify(0.1), &opts, &mut |_| {}).unwrap();
     assert!(rec.rows.iter().all(|r| r.rate_ref_dps == Some(150.0)));
-    assert_eq!(truth["rate_table"], true);
+    assert!(truth.rate_table);
 }
 
 #[test]
@@ -846,7 +862,10 @@ fn replay_to_dir_with_f32_core() {
     assert!(last.rate_dps_est.is_finite());
     // summary.json is the typed summary, keys sorted
     let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-    assert_eq!(text, paragyro_simulator::summary::to_json_pretty(s).unwrap());
+    assert_eq!(
+        text,
+        paragyro_simulator::summary::to_json_pretty(s).unwrap()
+    );
     assert!(text.contains("\"precision\": \"f32\""), "{text}");
     assert!(text.contains("\"health_final\": ["), "{text}");
     assert!(out.text.starts_with("Replayed identify.csv: 751 samples"));

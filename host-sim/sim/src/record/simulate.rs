@@ -5,13 +5,13 @@ use std::time::Instant;
 
 use anyhow::Context;
 use paragyro_core::Estimator;
-use serde_json::{Map, Value, json};
+use serde::Serialize;
 
 use super::{Record, RecordHeader, RecordRow, write_record};
 use crate::effects::Effects;
 use crate::runner::{self, Device};
-use crate::scenario::{L0_M, PlantAt, Scenario};
-use crate::trace::{PHYS_NAMES, THETA_DRIVE_NAMES, THETA_SENSE_NAMES};
+use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, Scenario};
+use crate::summary::PhysicalValues;
 
 /// Pump voltage amplitude V0 at which s = 1 in simulated records, V.
 pub const SIM_PUMP_AMP_REF_V: f64 = 1.0;
@@ -39,7 +39,7 @@ pub const DEFAULT_TEMP_PROFILE: (f64, f64) = (25.0, 5.0);
 
 /// A simulated record of a scenario (main run, no twin) and its truth; see
 /// [`simulate_record_with`].
-pub fn simulate_record(sc: &Scenario, seed: Option<u64>) -> anyhow::Result<(Record, Value)> {
+pub fn simulate_record(sc: &Scenario, seed: Option<u64>) -> anyhow::Result<(Record, RecordTruth)> {
     let opts = RecordOptions {
         seed,
         ..RecordOptions::default()
@@ -47,7 +47,7 @@ pub fn simulate_record(sc: &Scenario, seed: Option<u64>) -> anyhow::Result<(Reco
     simulate_record_with(sc, &opts, &mut |_| {})
 }
 
-/// A simulated record and its truth (JSON).
+/// A simulated record and its truth ([`RecordTruth`]).
 ///
 /// The closed loop of [`runner::simulate`] with the `f64` core and [`runner::core_config`]:
 /// at every 500 Hz sample the lock-in outputs, the accelerations and the pump in effect go
@@ -59,7 +59,7 @@ pub fn simulate_record_with(
     sc: &Scenario,
     opts: &RecordOptions,
     progress: &mut dyn FnMut(f64),
-) -> anyhow::Result<(Record, Value)> {
+) -> anyhow::Result<(Record, RecordTruth)> {
     let gamma_per_dps = paragyro_core::physics::gamma_from_rate_dps(1.0, sc.omega0_rad_s());
     let effects = Effects::from_specs(&opts.effects, gamma_per_dps).map_err(anyhow::Error::msg)?;
     let temp = opts
@@ -114,15 +114,12 @@ pub fn simulate_record_with(
         ("device".into(), "simulated".into()),
     ];
     let t_end = rows.last().map_or(0.0, |r| r.t_s);
-    let truth = truth_json(
-        sc,
-        opts,
-        seed,
-        t_end,
-        rows.len(),
+    let closed_loop = TruthClosedLoop {
+        core: "f64",
         pump_centre_initial_hz,
-        est.pump_centre_hz(),
-    );
+        pump_centre_final_hz: est.pump_centre_hz(),
+    };
+    let truth = record_truth(sc, opts, seed, rows.len(), t_end, closed_loop);
     let rec = Record {
         header,
         rows,
@@ -131,82 +128,200 @@ pub fn simulate_record_with(
     Ok((rec, truth))
 }
 
-fn plant_json(pa: &PlantAt, t_s: f64, accel_si: f64) -> Value {
-    let named = |names: &[&str], v: &[f64]| {
-        let mut o = Map::new();
-        for (n, x) in names.iter().zip(v) {
-            o.insert((*n).into(), json!(x));
-        }
-        Value::Object(o)
-    };
-    json!({
-        "t_s": t_s,
-        "theta_drive": named(&THETA_DRIVE_NAMES, &pa.theta_drive),
-        "theta_sense": named(&THETA_SENSE_NAMES, &pa.theta_sense),
-        "physical": named(&PHYS_NAMES, &pa.phys),
-        "rate_dps": pa.rate_dps,
-        "accel_x_mps2": pa.accel_x * accel_si,
-        "accel_y_mps2": pa.accel_y * accel_si,
-    })
+/// The truth of a simulated record (`FILE.truth.json`, never inside the record): the
+/// scenario, the seed, the plant at both ends, the events, the effects and what the closed
+/// loop did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RecordTruth {
+    /// `"paragyro-record-truth 1"`.
+    pub format: &'static str,
+    /// Scenario name.
+    pub scenario: String,
+    /// Where the scenario came from.
+    pub scenario_source: String,
+    /// Its description.
+    pub description: String,
+    /// Noise seed used.
+    pub seed: u64,
+    /// Rows of the record.
+    pub samples: usize,
+    /// Time of the last row, s.
+    pub duration_s: f64,
+    /// Drive natural frequency, Hz.
+    pub f0_hz: f64,
+    /// ω0 = 2π·f0, rad/s.
+    pub omega0_rad_s: f64,
+    /// Displacement noise density, pm/√Hz.
+    pub noise_pm_rthz: f64,
+    /// The lock-in of the simulated front end.
+    pub lockin: TruthLockin,
+    /// RK4 steps per carrier period.
+    pub steps_per_period: usize,
+    /// V_A0 of the record, V.
+    pub pump_amp_ref_v: f64,
+    /// Initial displacement, µm.
+    pub initial_state_um: TruthXy,
+    /// The plant at t = 0.
+    pub plant_start: TruthPlant,
+    /// The plant at the last row.
+    pub plant_end: TruthPlant,
+    /// The scenario's events (time order), with a description and, for a pump jump, the
+    /// centre it commands.
+    pub events: Vec<TruthEvent>,
+    /// The effects added to the simulated device.
+    pub effects: Vec<EffectSpec>,
+    /// Whether `rate_ref_dps` was written.
+    pub rate_table: bool,
+    /// The core that closed the loop while recording.
+    pub closed_loop: TruthClosedLoop,
+    /// The scenario has a twin run, which a record leaves out.
+    pub twin_ignored: bool,
+    /// The whole scenario.
+    pub scenario_spec: Scenario,
+    /// The record's file name (set by [`write_simulated_record`]; `Some(None)`: a path
+    /// without a file name).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub record: Option<Option<String>>,
 }
 
-fn truth_json(
+/// The simulated lock-in's low-pass.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TruthLockin {
+    /// Butterworth order.
+    pub lpf_order: usize,
+    /// Cut-off, Hz.
+    pub lpf_hz: f64,
+}
+
+/// A pair of drive (x) and sense (y) values.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TruthXy {
+    /// Drive axis.
+    pub x: f64,
+    /// Sense axis.
+    pub y: f64,
+}
+
+/// The simulated plant at one instant.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TruthPlant {
+    /// Time, s.
+    pub t_s: f64,
+    /// True θ1 (`{"th11": ..}`).
+    #[serde(serialize_with = "crate::summary::theta_drive_named")]
+    pub theta_drive: [f64; 8],
+    /// True θ2 (`{"th21": ..}`).
+    #[serde(serialize_with = "crate::summary::theta_sense_named")]
+    pub theta_sense: [f64; 6],
+    /// True physical parameters.
+    pub physical: PhysicalValues,
+    /// True rate, °/s.
+    pub rate_dps: f64,
+    /// Drive-axis acceleration, m/s².
+    pub accel_x_mps2: f64,
+    /// Sense-axis acceleration, m/s².
+    pub accel_y_mps2: f64,
+}
+
+impl TruthPlant {
+    fn new(pa: &PlantAt, t_s: f64, accel_si: f64) -> Self {
+        TruthPlant {
+            t_s,
+            theta_drive: pa.theta_drive,
+            theta_sense: pa.theta_sense,
+            physical: PhysicalValues::from_array(pa.phys),
+            rate_dps: pa.rate_dps,
+            accel_x_mps2: pa.accel_x * accel_si,
+            accel_y_mps2: pa.accel_y * accel_si,
+        }
+    }
+}
+
+/// One event of the scenario in the truth.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TruthEvent {
+    /// The event as the scenario has it (`t_s`, `kind` and the kind's keys).
+    #[serde(flatten)]
+    pub event: EventSpec,
+    /// One line for people.
+    pub what: TruthWhat,
+    /// The pump centre a `pump_jump` commands, Hz.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pump_centre_hz: Option<f64>,
+}
+
+/// An event's description, serialised as its `Display` line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TruthWhat(pub EventKind);
+
+impl Serialize for TruthWhat {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(&self.0)
+    }
+}
+
+/// What the closed loop did while recording.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TruthClosedLoop {
+    /// `"f64"`.
+    pub core: &'static str,
+    /// Pump centre at the start, Hz.
+    pub pump_centre_initial_hz: f64,
+    /// Pump centre at the end, Hz.
+    pub pump_centre_final_hz: f64,
+}
+
+fn record_truth(
     sc: &Scenario,
     opts: &RecordOptions,
     seed: u64,
-    t_end: f64,
     samples: usize,
-    pump_centre_initial_hz: f64,
-    pump_centre_final_hz: f64,
-) -> Value {
+    t_end: f64,
+    closed_loop: TruthClosedLoop,
+) -> RecordTruth {
     let w0 = sc.omega0_rad_s();
     let accel_si = L0_M * w0 * w0;
-    let plant = |t: f64| plant_json(&sc.plant_at(t), t, accel_si);
-    let events: Vec<Value> = sc
+    let plant = |t: f64| TruthPlant::new(&sc.plant_at(t), t, accel_si);
+    let events = sc
         .events
         .iter()
-        .map(|e| {
-            let mut v = serde_json::to_value(e).unwrap_or(Value::Null);
-            if let Value::Object(m) = &mut v {
-                m.insert("what".into(), json!(e.kind.to_string()));
-                if let Some(c) = sc.pump_jump_centre_hz(e) {
-                    m.insert("pump_centre_hz".into(), json!(c));
-                }
-            }
-            v
+        .map(|e| TruthEvent {
+            event: *e,
+            what: TruthWhat(e.kind),
+            pump_centre_hz: sc.pump_jump_centre_hz(e),
         })
         .collect();
-    json!({
-        "format": "paragyro-record-truth 1",
-        "scenario": sc.name,
-        "scenario_source": sc.source,
-        "description": sc.description,
-        "seed": seed,
-        "samples": samples,
-        "duration_s": t_end,
-        "f0_hz": sc.sim.f0_hz,
-        "omega0_rad_s": w0,
-        "noise_pm_rthz": sc.sim.noise_pm_rthz,
-        "lockin": {
-            "lpf_order": sc.sim.lockin_lpf_order,
-            "lpf_hz": sc.sim.lockin_lpf_hz,
+    RecordTruth {
+        format: "paragyro-record-truth 1",
+        scenario: sc.name.clone(),
+        scenario_source: sc.source.clone(),
+        description: sc.description.clone(),
+        seed,
+        samples,
+        duration_s: t_end,
+        f0_hz: sc.sim.f0_hz,
+        omega0_rad_s: w0,
+        noise_pm_rthz: sc.sim.noise_pm_rthz,
+        lockin: TruthLockin {
+            lpf_order: sc.sim.lockin_lpf_order,
+            lpf_hz: sc.sim.lockin_lpf_hz,
         },
-        "steps_per_period": sc.sim.steps_per_period,
-        "pump_amp_ref_v": SIM_PUMP_AMP_REF_V,
-        "initial_state_um": {"x": sc.plant.initial_x_um, "y": sc.plant.initial_y_um},
-        "plant_start": plant(0.0),
-        "plant_end": plant(t_end),
-        "events": events,
-        "effects": opts.effects,
-        "rate_table": opts.rate_table,
-        "closed_loop": {
-            "core": "f64",
-            "pump_centre_initial_hz": pump_centre_initial_hz,
-            "pump_centre_final_hz": pump_centre_final_hz,
+        steps_per_period: sc.sim.steps_per_period,
+        pump_amp_ref_v: SIM_PUMP_AMP_REF_V,
+        initial_state_um: TruthXy {
+            x: sc.plant.initial_x_um,
+            y: sc.plant.initial_y_um,
         },
-        "twin_ignored": sc.twin.is_some(),
-        "scenario_spec": serde_json::to_value(sc).unwrap_or(Value::Null),
-    })
+        plant_start: plant(0.0),
+        plant_end: plant(t_end),
+        events,
+        effects: opts.effects.clone(),
+        rate_table: opts.rate_table,
+        closed_loop,
+        twin_ignored: sc.twin.is_some(),
+        scenario_spec: sc.clone(),
+        record: None,
+    }
 }
 
 /// Where the truth of a simulated record goes: `FILE.csv` → `FILE.truth.json`
@@ -250,12 +365,9 @@ pub fn write_simulated_record(
     }
     write_record(out, &rec)?;
     let tp = truth_path(out);
-    if let Value::Object(m) = &mut truth {
-        let name = out.file_name().map(|n| n.to_string_lossy().into_owned());
-        m.insert("record".into(), json!(name));
-    }
-    let text = serde_json::to_string_pretty(&truth)?;
-    std::fs::write(&tp, text + "\n").with_context(|| format!("cannot write {}", tp.display()))?;
+    truth.record = Some(out.file_name().map(|n| n.to_string_lossy().into_owned()));
+    let text = crate::summary::to_json_pretty(&truth)?;
+    std::fs::write(&tp, text).with_context(|| format!("cannot write {}", tp.display()))?;
     Ok((
         RecordFiles {
             csv: out.to_path_buf(),
