@@ -10,6 +10,12 @@ use super::switch::paper_sets;
 
 /// Eigen-decomposition of a symmetric `n×n` matrix (row-major) by cyclic Jacobi rotations:
 /// eigenvalues in descending order and the matching unit eigenvectors (as rows).
+///
+/// Hand-written rather than nalgebra's `SymmetricEigen` (tridiagonal QR) for accuracy: on
+/// the steady-state drive information matrix (scaled condition ≈ 7e17) Jacobi's smallest
+/// eigenvalue is 3.0592839e-15 against 3.0592845e-15 from an exact rational inertia count
+/// (relative error 2e-7), nalgebra's 3.0674e-15 (3e-3), which moves the reported condition
+/// number and sensitivities by up to 0.3 %.
 pub fn symmetric_eigen(a: &[f64], n: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut m = a.to_vec();
     let mut v = vec![0.0; n * n];
