@@ -9,7 +9,7 @@ use paragyro_core::physics::{OMEGA0_TABLE2_RAD_S, TABLE2};
 use paragyro_simulator::summary::RunSummary;
 use serde::Serialize;
 
-use super::compare::{CompareRow, LAMBDAS, compare};
+use super::compare::{CompareRow, Comparison, LAMBDAS, compare};
 use super::config::{LambdaReading, PAPER_P0, RawConfig, Segment};
 use super::identifiability::{Identifiability, window_identifiability};
 use super::plots::{Quantity, physical_quantity, plot_est_truth, plot_literal, theta_quantity};
@@ -292,6 +292,47 @@ fn plots(dir: &Path, switch: &[SwitchResult]) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// The runs besides the ±50 % test: the comparison with the product, the identifiability
+/// windows and the late start.
+struct Studies {
+    cmp: Comparison,
+    steady: (Identifiability, Identifiability),
+    startup: (Identifiability, Identifiability),
+    late: LateStart,
+}
+
+/// [`Studies`], the four in parallel (the comparison's own runs in parallel inside it).
+fn studies() -> Result<Studies> {
+    enum Out {
+        Compare(Box<Comparison>),
+        Window((Identifiability, Identifiability)),
+        Late(LateStart),
+    }
+    let outs = try_par_map(vec![0, 1, 2, 3], |k| {
+        Ok(match k {
+            0 => Out::Compare(Box::new(compare(COMPARE_RAW_S)?)),
+            1 => Out::Window(window_identifiability((0.3, 0.5))?),
+            2 => Out::Window(window_identifiability((0.0, 0.03))?),
+            _ => Out::Late(late_start()?),
+        })
+    })?;
+    let mut it = outs.into_iter();
+    match (it.next(), it.next(), it.next(), it.next()) {
+        (
+            Some(Out::Compare(cmp)),
+            Some(Out::Window(steady)),
+            Some(Out::Window(startup)),
+            Some(Out::Late(late)),
+        ) => Ok(Studies {
+            cmp: *cmp,
+            steady,
+            startup,
+            late,
+        }),
+        _ => anyhow::bail!("the studies came back out of order"),
+    }
+}
+
 fn lambda_info(l: LambdaReading, w0: f64) -> LambdaInfo {
     LambdaInfo {
         key: l.key(),
@@ -321,10 +362,12 @@ pub fn write_paper_raw_summary(dir: &Path) -> Result<PaperRawSummary> {
     let mut switch = try_par_map(switch_jobs(), |o| {
         paper_switch(&o).map_err(|e| anyhow::anyhow!("±50 % runs: {e}"))
     })?;
-    let cmp = compare(COMPARE_RAW_S)?;
-    let (ss1, ss2) = window_identifiability((0.3, 0.5))?;
-    let (su1, su2) = window_identifiability((0.0, 0.03))?;
-    let late = late_start()?;
+    let Studies {
+        cmp,
+        steady: (ss1, ss2),
+        startup: (su1, su2),
+        late,
+    } = studies()?;
     let files = plots(dir, &switch)?;
     let table_md = {
         let long: Vec<&SwitchResult> = [Pump::Literal, Pump::Recentred]
