@@ -179,13 +179,7 @@ fn replay(syst: &mut SYST) -> bool {
     syst.clear_current();
     syst.enable_counter();
     let mut check = ReplayCheck::new(&table);
-    let mut total: u64 = 0;
-    let mut worst: u32 = 0;
-    let mut worst_k: usize = 0;
-    // the five costliest ticks (SysTick counts, tick), and the ticks over the budget
-    let mut top = [(0u32, 0usize); 5];
-    let budget = (TICK_BUDGET_INSNS * SYSTICK_HZ / 1_000_000_000) as u32;
-    let mut over_budget: u32 = 0;
+    let mut costs = TickCosts::new();
     for k in 0..table.len() {
         run::apply_controls(&table, k, app);
         let Some((pump_hz, pump_scale)) = table.pump(k) else {
@@ -194,21 +188,7 @@ fn replay(syst: &mut SYST) -> bool {
         let t0 = SYST::get_current();
         let r = app.tick_with_pump(&mut io, pump_hz, pump_scale);
         let t1 = SYST::get_current();
-        let dt = t0.wrapping_sub(t1) & 0x00FF_FFFF;
-        total += u64::from(dt);
-        if dt > worst {
-            worst = dt;
-            worst_k = k;
-        }
-        over_budget += u32::from(dt > budget);
-        if dt > top[top.len() - 1].0 {
-            let mut i = top.len() - 1;
-            top[i] = (dt, k);
-            while i > 0 && top[i].0 > top[i - 1].0 {
-                top.swap(i, i - 1);
-                i -= 1;
-            }
-        }
+        costs.observe(t0.wrapping_sub(t1) & 0x00FF_FFFF, k);
         check.observe(&table, k, app, &r, dds.active_pump_hz());
         #[cfg(feature = "tick-stream")]
         {
@@ -233,32 +213,7 @@ fn replay(syst: &mut SYST) -> bool {
             super::telemetry(k as u32, fs_hz, app, &r);
         }
     }
-    let n = table.len().max(1) as u64;
-    let mean = total * 1_000_000_000 / SYSTICK_HZ / n;
-    let max = u64::from(worst) * 1_000_000_000 / SYSTICK_HZ;
-    defmt::info!(
-        "App::tick_with_pump: {=usize} ticks, {=u64} instructions per tick (mean, SysTick under -icount shift=0, ±6), {=u64} (max, at tick {=usize})",
-        table.len(),
-        mean,
-        max,
-        worst_k
-    );
-    let insns = |dt: u32| u64::from(dt) * 1_000_000_000 / SYSTICK_HZ;
-    defmt::info!(
-        "costliest ticks (instructions, tick): {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}; {=u32} ticks over {=u64}",
-        insns(top[0].0),
-        top[0].1,
-        insns(top[1].0),
-        top[1].1,
-        insns(top[2].0),
-        top[2].1,
-        insns(top[3].0),
-        top[3].1,
-        insns(top[4].0),
-        top[4].1,
-        over_budget,
-        TICK_BUDGET_INSNS
-    );
+    costs.log(table.len());
     let loop_stack = stack_high_water();
     let (_, stack_top) = stack_bounds();
     defmt::info!(
@@ -272,6 +227,83 @@ fn replay(syst: &mut SYST) -> bool {
     let v = check.verdict(&table, app, dds.active_pump_hz());
     defmt::info!("core counters: {}", app.estimator().counters());
     defmt::info!("firmware counters: {}", app.counters());
+    log_verdict(&v);
+    v.pass()
+}
+
+/// SysTick cost of every tick (instructions under `-icount shift=0`): mean, worst, the
+/// five costliest and the number over the budget.
+struct TickCosts {
+    total: u64,
+    worst: u32,
+    worst_k: usize,
+    top: [(u32, usize); 5],
+    budget: u32,
+    over_budget: u32,
+}
+
+impl TickCosts {
+    fn new() -> Self {
+        TickCosts {
+            total: 0,
+            worst: 0,
+            worst_k: 0,
+            top: [(0, 0); 5],
+            budget: (TICK_BUDGET_INSNS * SYSTICK_HZ / 1_000_000_000) as u32,
+            over_budget: 0,
+        }
+    }
+
+    /// Tick `k` took `dt` SysTick counts.
+    fn observe(&mut self, dt: u32, k: usize) {
+        self.total += u64::from(dt);
+        if dt > self.worst {
+            self.worst = dt;
+            self.worst_k = k;
+        }
+        self.over_budget += u32::from(dt > self.budget);
+        let top = &mut self.top;
+        if dt > top[top.len() - 1].0 {
+            let mut i = top.len() - 1;
+            top[i] = (dt, k);
+            while i > 0 && top[i].0 > top[i - 1].0 {
+                top.swap(i, i - 1);
+                i -= 1;
+            }
+        }
+    }
+
+    fn log(&self, ticks: usize) {
+        let insns = |dt: u32| u64::from(dt) * 1_000_000_000 / SYSTICK_HZ;
+        let mean = self.total * 1_000_000_000 / SYSTICK_HZ / ticks.max(1) as u64;
+        defmt::info!(
+            "App::tick_with_pump: {=usize} ticks, {=u64} instructions per tick (mean, SysTick under -icount shift=0, ±6), {=u64} (max, at tick {=usize})",
+            ticks,
+            mean,
+            insns(self.worst),
+            self.worst_k
+        );
+        let top = &self.top;
+        defmt::info!(
+            "costliest ticks (instructions, tick): {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}, {=u64} {=usize}; {=u32} ticks over {=u64}",
+            insns(top[0].0),
+            top[0].1,
+            insns(top[1].0),
+            top[1].1,
+            insns(top[2].0),
+            top[2].1,
+            insns(top[3].0),
+            top[3].1,
+            insns(top[4].0),
+            top[4].1,
+            self.over_budget,
+            TICK_BUDGET_INSNS
+        );
+    }
+}
+
+/// The replay's checks, one line each.
+fn log_verdict(v: &run::Verdict) {
     defmt::info!(
         "wy2 {=f64} (true {=f64}, tolerance {=f64}): {=bool}",
         v.wy2_est,
@@ -300,7 +332,6 @@ fn replay(syst: &mut SYST) -> bool {
         v.rate_dps,
         v.digest
     );
-    v.pass()
 }
 
 #[exception]

@@ -36,6 +36,7 @@ use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
 use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
+use embedded_hal::spi::SpiDevice;
 use embedded_hal_bus::spi::{ExclusiveDevice, RefCellDevice};
 use paragyro_core::Config;
 use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
@@ -78,6 +79,33 @@ fn fail(what: &str) -> ! {
     loop {
         cortex_m::asm::bkpt();
     }
+}
+
+/// An initialised ADS131M08 (the board stops if it does not answer).
+fn init_adc<D: SpiDevice>(dev: D, delay: &mut CycleDelay) -> Ads131m08<D> {
+    let mut adc = Ads131m08::new(dev);
+    if adc.init(delay, &ads131m08::Config::PARAGYRO).is_err() {
+        fail("ADS131M08 init failed");
+    }
+    adc
+}
+
+/// An initialised ADXL355: ±8 g, 500 Hz, no high-pass.
+fn init_accel<D: SpiDevice>(dev: D) -> Adxl355<D> {
+    let mut accel = Adxl355::new(dev);
+    if accel.init(Range::G8, Odr::Hz500, HighPass::Off).is_err() {
+        fail("ADXL355 init failed");
+    }
+    accel
+}
+
+/// An initialised AD9959 with its PLL set.
+fn init_dds<D: SpiDevice>(dev: D) -> Ad9959<D> {
+    let mut dds = Ad9959::new(dev, DDS_REF_HZ * f64::from(DDS_PLL));
+    if dds.init().is_err() || dds.set_pll(DDS_REF_HZ, DDS_PLL).is_err() {
+        fail("AD9959 init failed");
+    }
+    dds
 }
 
 #[entry]
@@ -139,25 +167,10 @@ fn main() -> ! {
     let mut io = PinIoUpdate(gpiob.pb1.into_push_pull_output());
 
     let mut delay = CycleDelay;
-    let mut adc_x = Ads131m08::new(adc_x_dev);
-    let mut adc_y = Ads131m08::new(adc_y_dev);
-    if adc_x
-        .init(&mut delay, &ads131m08::Config::PARAGYRO)
-        .is_err()
-        || adc_y
-            .init(&mut delay, &ads131m08::Config::PARAGYRO)
-            .is_err()
-    {
-        fail("ADS131M08 init failed");
-    }
-    let mut accel = Adxl355::new(accel_dev);
-    if accel.init(Range::G8, Odr::Hz500, HighPass::Off).is_err() {
-        fail("ADXL355 init failed");
-    }
-    let mut dds = Ad9959::new(dds_dev, DDS_REF_HZ * f64::from(DDS_PLL));
-    if dds.init().is_err() || dds.set_pll(DDS_REF_HZ, DDS_PLL).is_err() {
-        fail("AD9959 init failed");
-    }
+    let adc_x = init_adc(adc_x_dev, &mut delay);
+    let adc_y = init_adc(adc_y_dev, &mut delay);
+    let accel = init_accel(accel_dev);
+    let mut dds = init_dds(dds_dev);
     if dds.take_io_update().is_some() {
         use paragyro_firmware::app::IoUpdate;
         io.pulse();
