@@ -96,9 +96,10 @@ pub fn raw_on_identify_plant(
     simulate(&cfg, &[seg]).map_err(|e| anyhow::anyhow!("raw estimator: {e}"))
 }
 
-fn raw_row(label: String, noise: f64, run: &RawRun, w0: f64) -> CompareRow {
-    let seg = &segment_summaries(run, &["nominal"], w0)[0];
-    CompareRow {
+fn raw_row(label: String, noise: f64, run: &RawRun, w0: f64) -> Result<CompareRow> {
+    let segs = segment_summaries(run, &["nominal"], w0).map_err(anyhow::Error::msg)?;
+    let seg = segs.first().context("a raw run without segments")?;
+    Ok(CompareRow {
         label,
         estimator: "paper (raw)".into(),
         noise_density: noise,
@@ -116,12 +117,12 @@ fn raw_row(label: String, noise: f64, run: &RawRun, w0: f64) -> CompareRow {
         sim_s: seg.end_s,
         wall_s: run.wall_s,
         blowup_s: run.estimator_blowup_s,
-    }
+    })
 }
 
-fn product_row(label: String, noise: f64, res: &RunResult) -> CompareRow {
+fn product_row(label: String, noise: f64, res: &RunResult) -> Result<CompareRow> {
     let tr = &res.trace;
-    let last = tr.last().expect("a run has samples");
+    let last = tr.last().context("a product run without samples")?;
     let mut fe = [0.0; 14];
     for j in 0..8 {
         fe[j] = rel_err(last.theta_drive_est[j], last.theta_drive_true[j]);
@@ -134,7 +135,7 @@ fn product_row(label: String, noise: f64, res: &RunResult) -> CompareRow {
     } else {
         500.0
     };
-    CompareRow {
+    Ok(CompareRow {
         label,
         estimator: "product (lock-in)".into(),
         noise_density: noise,
@@ -151,7 +152,7 @@ fn product_row(label: String, noise: f64, res: &RunResult) -> CompareRow {
         sim_s: last.t_s,
         wall_s: res.summary.wall_seconds,
         blowup_s: None,
-    }
+    })
 }
 
 /// λ readings compared everywhere.
@@ -207,7 +208,7 @@ pub fn compare(raw_sim_s: f64) -> Result<Comparison> {
             Out::Raw(r) => {
                 let (l, n) = (LAMBDAS[k % 3], if k < 3 { 0.0 } else { noise });
                 let nl = if n > 0.0 { "1 pm/√Hz" } else { "noise-free" };
-                rows.push(raw_row(format!("paper, {}, {nl}", l.label()), n, &r, w0));
+                rows.push(raw_row(format!("paper, {}, {nl}", l.label()), n, &r, w0)?);
                 raw_runs.push(r);
                 k += 1;
             }
@@ -218,7 +219,7 @@ pub fn compare(raw_sim_s: f64) -> Result<Comparison> {
                     format!("product (identify, f64, λd = 0.999), {nl}"),
                     n,
                     &r,
-                ));
+                )?);
                 product_runs.push(*r);
             }
         }

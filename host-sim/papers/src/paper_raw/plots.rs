@@ -127,8 +127,8 @@ fn run_label(r: &SwitchResult) -> String {
     }
 }
 
-/// Estimate-vs-truth panel of quantity `q` for the runs `runs` (one per λ reading), time in
-/// ms (`ms = true`) or s.
+/// Estimate-vs-truth panel of quantity `q` for the runs `runs` (one per λ reading, at least
+/// one), time in ms (`ms = true`) or s.
 fn est_truth_panel(q: &Quantity, runs: &[&SwitchResult], ms: bool, last_row: bool) -> Panel {
     let scale = if ms { 1e3 } else { 1.0 };
     let recs = &runs[0].run.records;
@@ -196,6 +196,9 @@ pub(super) fn plot_est_truth(
     ms_runs: &[&SwitchResult],
     long_runs: &[&SwitchResult],
 ) -> Result<()> {
+    if ms_runs.is_empty() || long_runs.is_empty() {
+        anyhow::bail!("no run to plot in {}", path.display());
+    }
     let rows = quantities.len();
     let (root, body) = figure_sized(path, (1500, 260 * rows as u32 + 60), title)?;
     let areas = grid(&body, rows, 2);

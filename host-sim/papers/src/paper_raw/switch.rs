@@ -112,8 +112,13 @@ pub struct SegmentSummary {
     pub rate_dps_true: f64,
 }
 
-/// Summaries of the segments of a run.
-pub fn segment_summaries(run: &RawRun, labels: &[&str], omega0_rad_s: f64) -> Vec<SegmentSummary> {
+/// Summaries of the segments of a run; an error if a segment has no record at or before
+/// its end (a run of [`simulate`] always has the one at t = 0).
+pub fn segment_summaries(
+    run: &RawRun,
+    labels: &[&str],
+    omega0_rad_s: f64,
+) -> Result<Vec<SegmentSummary>, String> {
     let t_end = run.records.last().map_or(0.0, |r| r.t_s);
     (0..run.segment_starts_s.len())
         .map(|k| {
@@ -124,9 +129,9 @@ pub fn segment_summaries(run: &RawRun, labels: &[&str], omega0_rad_s: f64) -> Ve
                 .iter()
                 .rev()
                 .find(|r| r.t_s <= t1 + 1e-12)
-                .expect("records");
+                .ok_or_else(|| format!("segment {k}: no record at or before {t1} s"))?;
             let (pe, pt) = physical_of(last);
-            SegmentSummary {
+            Ok(SegmentSummary {
                 label: labels
                     .get(k)
                     .map_or_else(|| format!("segment {k}"), |s| s.to_string()),
@@ -140,7 +145,7 @@ pub fn segment_summaries(run: &RawRun, labels: &[&str], omega0_rad_s: f64) -> Ve
                 sense_amp_end: last.sense_amp,
                 rate_dps_est: rate_dps_from_gamma(pe.gamma, omega0_rad_s),
                 rate_dps_true: rate_dps_from_gamma(pt.gamma, omega0_rad_s),
-            }
+            })
         })
         .collect()
 }
@@ -209,7 +214,7 @@ pub fn paper_switch(opts: &SwitchOptions) -> Result<SwitchResult, String> {
         ..RawConfig::default()
     };
     let run = simulate(&cfg, &segs)?;
-    let segments = segment_summaries(&run, &SET_LABELS, w0);
+    let segments = segment_summaries(&run, &SET_LABELS, w0)?;
     let nominal = segments[0].drive_amp_end;
     let t_switch = run.segment_starts_s[1];
     let below = run
