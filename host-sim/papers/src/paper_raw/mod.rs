@@ -124,8 +124,6 @@ pub use identifiability::{
 };
 pub use ode::RK4_STABILITY_LIMIT;
 pub use records::{physical_of, rel_err, settle_time, theta_rel_errors};
-#[allow(deprecated)]
-pub use report::write_paper_raw_report;
 pub use report::{
     AxisPair, COMPARE_RAW_S, FINE_STEPS_PER_PERIOD, IdentifiabilityReport, LambdaInfo, LateStart,
     PaperRawSummary, RunNumbers, SwitchRecord, write_paper_raw_summary,

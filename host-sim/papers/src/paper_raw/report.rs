@@ -409,10 +409,3 @@ pub fn write_paper_raw_summary(dir: &Path) -> Result<PaperRawSummary> {
     crate::write_json(&dir.join("paper_raw_summary.json"), &out, true)?;
     Ok(out)
 }
-
-/// [`write_paper_raw_summary`] as untyped JSON, for the CLI until it reads
-/// [`PaperRawSummary::table_md`] (then this goes).
-#[deprecated(note = "use write_paper_raw_summary(dir)?.table_md instead of v[\"table_md\"]")]
-pub fn write_paper_raw_report(dir: &Path) -> Result<serde_json::Value> {
-    Ok(serde_json::to_value(write_paper_raw_summary(dir)?)?)
-}
