@@ -25,12 +25,13 @@ use serde::Serialize;
 
 use crate::trace::TraceRow;
 
-/// Reference length L0 of the non-dimensional displacements, m (1 µm).
-pub const L0_M: f64 = 1e-6;
+/// Reference length L0 of the non-dimensional displacements, m (1 µm): the core's
+/// [`physics::L0_TABLE2_M`].
+pub const L0_M: f64 = physics::L0_TABLE2_M;
 
-/// Drive natural frequency ω0/2π implied by Table 2 (the core's
-/// [`physics::OMEGA0_TABLE2_RAD_S`]: γ = 3.8581e-5 ⇔ 150 °/s), Hz.
-pub const DEFAULT_F0_HZ: f64 = physics::OMEGA0_TABLE2_RAD_S / (2.0 * PI);
+/// Drive natural frequency ω0/2π implied by Table 2 (γ = 3.8581e-5 ⇔ 150 °/s), Hz: the
+/// core's [`physics::F0_TABLE2_HZ`].
+pub const DEFAULT_F0_HZ: f64 = physics::F0_TABLE2_HZ;
 
 /// The built-in scenarios: (name, one-line description, embedded TOML, file name).
 const BUILTINS: [(&str, &str, &str, &str); 5] = [
