@@ -98,7 +98,7 @@ pub struct RawConfig {
     /// The estimator (θ̂, P) is held at its initial value until this time, s (the plant and
     /// the Λ filters run from 0). 0 = the paper (estimation from the start).
     pub estimator_start_s: f64,
-    /// θ with which the equation error [`RawRecord::e_true_rms`] is evaluated, if not the
+    /// θ with which the equation error [`RawRecord::e_true_rms`](super::RawRecord::e_true_rms) is evaluated, if not the
     /// plant's own (to check that the identity is sensitive to θ).
     pub model_theta: Option<Theta>,
     /// Window `[from, to)` in s over which the information matrices ∫ΦΦᵀdτ are accumulated

@@ -102,9 +102,10 @@
 //!
 //! # Modules
 //!
-//! [`config`] (settings), `ode` (the combined ODE and its RK4 step), [`simulate`] (a run),
-//! [`records`] (errors, settling), [`switch`] (the ±50 % test), [`compare`] (against the
-//! product), [`identifiability`], `report`, `plots` and `tables` (the report's outputs).
+//! [`config`] (settings), `ode` (the combined ODE and its RK4 step), [`mod@simulate`] (a
+//! run), [`records`] (errors, settling), [`switch`] (the ±50 % test), [`mod@compare`]
+//! (against the product), [`mod@identifiability`], `report`, `plots` and `tables` (the
+//! report's outputs).
 
 pub mod compare;
 pub mod config;

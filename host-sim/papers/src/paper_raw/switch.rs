@@ -170,7 +170,7 @@ pub struct SwitchResult {
     pub segment_s: f64,
     /// Minimum RK4 steps per carrier period.
     pub steps_per_period: usize,
-    /// The run (records not serialised; see [`run_summary`]).
+    /// The run (not serialised; the report writes its [`RunNumbers`](super::RunNumbers)).
     #[serde(skip)]
     pub run: RawRun,
     /// One summary per set.
