@@ -205,6 +205,13 @@ pub struct Report {
     pub timing_s: BTreeMap<String, f64>,
 }
 
+impl Report {
+    /// report.md (without the plots, which it links) for the record `record_name`.
+    pub fn markdown(&self, record_name: &str) -> String {
+        super::markdown::markdown(self, record_name)
+    }
+}
+
 /// The full result.
 #[derive(Clone, Debug)]
 pub struct Diagnosis {
@@ -395,7 +402,7 @@ pub fn write_report(dir: &Path, d: &Diagnosis, record_name: &str) -> anyhow::Res
     files.push(jp);
     files.extend(crate::diagplot::plots(dir, d)?);
     let mp = dir.join("report.md");
-    std::fs::write(&mp, super::markdown::markdown(&d.report, record_name))
+    std::fs::write(&mp, d.report.markdown(record_name))
         .with_context(|| format!("cannot write {}", mp.display()))?;
     files.push(mp);
     Ok(files)
