@@ -21,8 +21,8 @@ pub struct Args {
 
 /// Runs the benchmark (progress on stderr) and prints the headline scores.
 pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
-    let s = paragyro_diagnose::blind::run(a.n, a.seed, &a.out, &|m| note(m))
-        .map_err(fail(EXIT_RUN))?;
+    let s =
+        paragyro_diagnose::blind::run(a.n, a.seed, &a.out, &|m| note(m)).map_err(fail(EXIT_RUN))?;
     let p = |v: Option<f64>| v.map_or("–".into(), |x| format!("{:.0} %", 100.0 * x));
     ctx.say(&format!(
         "Blind benchmark, N = {}, seed {}:\n  top-1 (single, above limit) {}\n  unknown on out-of-library {}\n  false alarms on clean {}\n  median closure / oracle {}\nWrote {}/score.md and score.json\n",

@@ -82,7 +82,10 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         100.0 * r.gap_closure,
         r.output_error
             .as_ref()
-            .map_or("not computed".into(), |o| format!("{:.1} %", 100.0 * o.closure))
+            .map_or("not computed".into(), |o| format!(
+                "{:.1} %",
+                100.0 * o.closure
+            ))
     ));
     text.push_str(&format!(
         "Took {:.2} s. Wrote {} files to {}\n",
