@@ -346,18 +346,19 @@ fn qemu_matches_host() {
     let (qx, qy) = (upc(0), upc(1));
     for (k, (r, s)) in rec.rows.iter().zip(&sim.rows).enumerate() {
         let ts = table.sample(k).unwrap();
+        let (lr, ls) = (&r.lockin, &s.lockin);
         // the pump and the accelerations are the table's, exactly
         assert_eq!(r.pump_hz.to_bits(), ts.pump_hz.to_bits(), "row {k}: pump");
         let back = r.to_sample::<f32>(&rec.header);
         assert_eq!(back.pump_scale, ts.pump_scale, "row {k}: pump scale");
         // the lock-in values are the simulator's to within half an ADC code (+ f32)
         let xs = [
-            (r.x0_um, s.x0_um, qx),
-            (r.x_um[0].0, s.x_um[0].0, qx),
-            (r.x_um[0].1, s.x_um[0].1, qx),
-            (r.y0_um, s.y0_um, qy),
-            (r.y_um[0].0, s.y_um[0].0, qy),
-            (r.y_um[0].1, s.y_um[0].1, qy),
+            (lr.x0_um, ls.x0_um, qx),
+            (lr.x_um[0].re, ls.x_um[0].re, qx),
+            (lr.x_um[0].im, ls.x_um[0].im, qx),
+            (lr.y0_um, ls.y0_um, qy),
+            (lr.y_um[0].re, ls.y_um[0].re, qy),
+            (lr.y_um[0].im, ls.y_um[0].im, qy),
         ];
         for (cap, simv, q) in xs {
             assert!(

@@ -46,8 +46,7 @@ fn run_unknown_scenario_exits_2_listing_builtins() {
 
 #[test]
 fn run_bad_file_exits_2_with_file_and_line() {
-    let path =
-        std::env::temp_dir().join(format!("paragyro-cli-bad-{}.toml", std::process::id()));
+    let path = std::env::temp_dir().join(format!("paragyro-cli-bad-{}.toml", std::process::id()));
     std::fs::write(
         &path,
         "name = \"x\"\nduration_s = 1.0\n[plant]\nwy2 = \"high\"\n",

@@ -27,8 +27,8 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
 use crate::diagnose::{self, Answer, Model, Options, Report, to_json_sorted};
-use crate::par;
 use paragyro_simulator::effects::{Effect, EffectSpec, LIBRARY, OUT_OF_LIBRARY};
+use paragyro_simulator::par;
 use paragyro_simulator::record::{self, RecordOptions};
 use paragyro_simulator::scenario::Scenario;
 

@@ -7,4 +7,3 @@
 pub mod blind;
 pub mod diagnose;
 pub mod diagplot;
-pub mod par;

@@ -1,6 +1,7 @@
 //! Each effect's signature appears in the simulated record: noise-free records of the
 //! `characterise` scenario (first 3 s) with and without the effect, same everything else.
 
+use paragyro_core::Cplx;
 use paragyro_simulator::effects::{EffectSpec, LIBRARY, OUT_OF_LIBRARY};
 use paragyro_simulator::record::{Record, RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
@@ -22,8 +23,8 @@ fn rec(effects: &[&str]) -> Record {
 }
 
 fn diff(a: &Record, b: &Record, k: usize) -> [f64; 4] {
-    let (r, s) = (&a.rows[k], &b.rows[k]);
-    let c = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
+    let (r, s) = (&a.rows[k].lockin, &b.rows[k].lockin);
+    let c = |p: Cplx<f64>, q: Cplx<f64>| (p.re - q.re).hypot(p.im - q.im);
     [
         (r.x0_um - s.x0_um).abs(),
         c(r.x_um[0], s.x_um[0]),
@@ -65,7 +66,7 @@ fn feedthrough_offsets_the_sense_dc() {
     let (clean, ft) = (rec(&[]), rec(&["feedthrough=1e-3"]));
     let k = 1000; // 2 s: s = 1 ± 10 % dither
     let s = (ft.rows[k].pump_amp_v / ft.header.pump_amp_ref_v).powi(2);
-    let dy0 = ft.rows[k].y0_um - clean.rows[k].y0_um;
+    let dy0 = ft.rows[k].lockin.y0_um - clean.rows[k].lockin.y0_um;
     // the DC channel is the lock-in's low-passed C·s(t): within the dither's change over
     // the low-pass delay of the sample value
     assert!((dy0 - 1e-3 * s).abs() < 2e-5, "{dy0} vs {}", 1e-3 * s);
@@ -107,8 +108,8 @@ fn angular_vibration_beats_at_its_beat() {
         .map(|&k| {
             (
                 v.rows[k].t_s,
-                v.rows[k].y_um[0].0 - clean.rows[k].y_um[0].0,
-                v.rows[k].y_um[0].1 - clean.rows[k].y_um[0].1,
+                v.rows[k].lockin.y_um[0].re - clean.rows[k].lockin.y_um[0].re,
+                v.rows[k].lockin.y_um[0].im - clean.rows[k].lockin.y_um[0].im,
             )
         })
         .collect();

@@ -15,6 +15,7 @@
 //! `pump_amp_v = vref·√s`, which `RecordRow::to_sample` squares back).
 
 use anyhow::{Context, bail, ensure};
+use paragyro_simulator::lockin::{LockinExt, LockinOut};
 use paragyro_simulator::record::{Record, RecordHeader, RecordRow};
 
 /// `key=value` pairs after `marker` (arrays `[a, b]` are one value).
@@ -127,10 +128,9 @@ pub fn parse_capture(text: &str, source: &str) -> anyhow::Result<Record> {
             pump_amp_v: h.pump_amp_ref_v * s.sqrt(),
             ax_mps2: a[0],
             ay_mps2: a[1],
-            x0_um: x[0],
-            x_um: [(x[1], x[2]), (x[3], x[4]), (x[5], x[6])],
-            y0_um: y[0],
-            y_um: [(y[1], y[2]), (y[3], y[4]), (y[5], y[6])],
+            lockin: LockinOut::from_channels(&[
+                x[0], x[1], x[2], x[3], x[4], x[5], x[6], y[0], y[1], y[2], y[3], y[4], y[5], y[6],
+            ]),
             temp_c: None,
             rate_ref_dps: None,
         });

@@ -77,7 +77,9 @@ fn main() -> anyhow::Result<()> {
                 sc.duration_s,
                 t.um_per_volt[0],
                 t.um_per_volt[1],
-                paragyro_firmware::table::fnv1a64(&t.bytes[paragyro_firmware::table::HEADER_BYTES..]),
+                paragyro_firmware::table::fnv1a64(
+                    &t.bytes[paragyro_firmware::table::HEADER_BYTES..]
+                ),
             );
             println!(
                 "core: pump centre {:.4} Hz, nominal ωy² {}; truth: ωy² {} → {}, sense resonance at the end {:.4} Hz, record pump at the end {:.4} Hz",

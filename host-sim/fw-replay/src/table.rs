@@ -8,6 +8,7 @@
 
 use anyhow::{Context, bail, ensure};
 use paragyro_core::Config;
+use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::record::{Record, simulate_record};
 use paragyro_simulator::runner;
 use paragyro_simulator::scenario::{EventKind, PlantParam, Scenario};
@@ -96,12 +97,9 @@ pub fn build(sc: &Scenario, seed: Option<u64>) -> anyhow::Result<Table> {
             .rows
             .iter()
             .flat_map(|r| {
-                let (c0, c) = if axis == 0 {
-                    (r.x0_um, r.x_um)
-                } else {
-                    (r.y0_um, r.y_um)
-                };
-                [c0, c[0].0, c[0].1, c[1].0, c[1].1, c[2].0, c[2].1]
+                let ch = r.lockin.to_channels();
+                let axis_ch: [f64; 7] = std::array::from_fn(|i| ch[7 * axis + i]);
+                axis_ch
             })
             .fold(0.0, |m: f64, v| m.max(v.abs()))
     };
@@ -111,12 +109,10 @@ pub fn build(sc: &Scenario, seed: Option<u64>) -> anyhow::Result<Table> {
 
     let mut samples = Vec::with_capacity(record.rows.len() * SAMPLE_BYTES);
     for (k, r) in record.rows.iter().enumerate() {
-        let axes = [
-            (r.x0_um, r.x_um, um_per_code[0]),
-            (r.y0_um, r.y_um, um_per_code[1]),
-        ];
-        for (c0, c, upc) in axes {
-            for v in [c0, c[0].0, c[0].1, c[1].0, c[1].1, c[2].0, c[2].1] {
+        // drive axis (X0, A1re, …, A3im), then sense (Y0, B1re, …): the table's order
+        let ch = r.lockin.to_channels();
+        for (axis, upc) in um_per_code.iter().enumerate() {
+            for &v in &ch[7 * axis..7 * axis + 7] {
                 ensure!(v.is_finite(), "row {k}: non-finite lock-in value");
                 // the firmware's decoder sees f32 values; encode the f32 the core would get
                 push_i24(&mut samples, round_half_away(f64::from(v as f32) / upc))?;
@@ -202,11 +198,9 @@ fn controls(sc: &Scenario, fs: f64, n: usize) -> anyhow::Result<Vec<(u32, u32, f
                 }
                 out.push((k, control::DITHER, if enabled { 1.0 } else { 0.0 }));
             }
-            EventKind::Retune { enabled } => out.push((
-                k,
-                control::RETUNE,
-                if enabled { 1.0 } else { 0.0 },
-            )),
+            EventKind::Retune { enabled } => {
+                out.push((k, control::RETUNE, if enabled { 1.0 } else { 0.0 }))
+            }
             EventKind::PumpScale { .. } => {
                 bail!(
                     "pump_scale events are not replayed by the firmware (the board's amplitude mapping is fixed)"

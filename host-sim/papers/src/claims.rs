@@ -11,6 +11,7 @@
 use serde::Serialize;
 
 use paragyro_core::physics::{TABLE2, theta_from_physical};
+use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 
 /// One reading of the claim.

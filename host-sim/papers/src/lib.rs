@@ -6,8 +6,8 @@
 //! * [`paper001`]: seed 001's stationary regimes and Figs 3–4;
 //! * [`paper_raw`]: seed 000's own estimator on the raw fast signals;
 //! * [`claims`]: the readings of the paper's "20 %" claim;
-//! * [`numerics`], [`complex`], [`par`]: what they share (linear algebra, continuation,
-//!   complex division, parallel maps whose panics are errors).
+//! * [`numerics`], [`complex`]: what they share (linear algebra, continuation,
+//!   complex division; parallel maps are `paragyro_simulator::par`).
 #![forbid(unsafe_code)]
 #![allow(clippy::needless_range_loop)]
 
@@ -17,7 +17,6 @@ pub mod complex;
 pub mod numerics;
 pub mod paper001;
 pub mod paper_raw;
-pub mod par;
 
 use std::path::Path;
 

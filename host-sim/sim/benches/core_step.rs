@@ -5,7 +5,8 @@
 //! `cargo bench -p paragyro-sim --bench core_step`
 
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
-use paragyro_core::{Cplx, Estimator, Lockin, Real, Sample};
+use paragyro_core::{Estimator, Real, Sample};
+use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::runner::{closed_loop, core_config};
 use paragyro_simulator::scenario::Scenario;
 
@@ -33,14 +34,8 @@ fn record() -> (Vec<Sample<f64>>, Scenario) {
 }
 
 fn cast<T: Real>(s: &Sample<f64>) -> Sample<T> {
-    let c = |z: Cplx<f64>| z.cast::<T>();
     Sample {
-        lockin: Lockin {
-            x0_um: T::from_f64(s.lockin.x0_um),
-            x_um: s.lockin.x_um.map(c),
-            y0_um: T::from_f64(s.lockin.y0_um),
-            y_um: s.lockin.y_um.map(c),
-        },
+        lockin: s.lockin.to_precision::<T>(),
         accel_mps2: s.accel_mps2.map(T::from_f64),
         pump_hz: s.pump_hz,
         pump_scale: T::from_f64(s.pump_scale),

@@ -6,6 +6,7 @@
 //! of a plain timed run (target ≥ 10, ARCHITECTURE.md §5).
 
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
+use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use std::time::Instant;
 

@@ -7,6 +7,7 @@
 
 pub mod effects;
 pub mod lockin;
+pub mod par;
 pub mod plant;
 pub mod plot;
 pub mod record;

@@ -64,72 +64,80 @@ pub const MAX_LPF_ORDER: usize = 8;
 /// Number of block moments (polynomial degree of the block kernel + 1).
 const NMOM: usize = 4;
 
-/// Channel names in the order of [`LockinOut::to_channels`] (same as the prototype's
+/// Channel names in the order of [`LockinExt::to_channels`] (same as the prototype's
 /// `CH_NAMES[0..14]`).
 pub const CHANNEL_NAMES: [&str; NCH] = [
     "X0", "A1r", "A1i", "A2r", "A2i", "A3r", "A3i", "Y0", "B1r", "B1i", "B2r", "B2i", "B3r", "B3i",
 ];
 
-/// The 14 lock-in outputs at one sampling instant (length unit L0, non-dimensional).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct LockinOut {
-    /// DC channel of the drive axis, `X0 = LP[Xm]`.
-    pub x0: f64,
-    /// Drive harmonics `A_k = LP[2·Xm·e^{−ikψ}]` for k = 1, 2, 3, as (re, im).
-    pub x: [(f64, f64); 3],
-    /// DC channel of the sense axis, `Y0 = LP[Ym]`.
-    pub y0: f64,
-    /// Sense harmonics `B_k = LP[2·Ym·e^{−ikψ}]` for k = 1, 2, 3, as (re, im).
-    pub y: [(f64, f64); 3],
+pub use paragyro_core::Lockin;
+use paragyro_core::{Cplx, Real};
+
+/// The host's one lock-in channel type: the core's [`Lockin`] in `f64`, the 14 outputs at
+/// one sampling instant in µm (the simulator's length unit L0 is 1 µm): `x0_um = X0 =
+/// LP[Xm]`, `x_um[k−1] = A_k = LP[2·Xm·e^{−ikψ}]` (k = 1, 2, 3), the same for Y. The
+/// simulated plant produces it, a record row holds it, the core takes it in its own
+/// precision ([`LockinExt::to_precision`]); the conversions to and from the 14 real
+/// channels ([`CHANNEL_NAMES`] order, which is also the record's column order) are here.
+pub type LockinOut = Lockin<f64>;
+
+/// The conversions of the host lock-in type ([`LockinOut`]), in one place.
+pub trait LockinExt: Sized {
+    /// Builds the output from the 14 channels in [`CHANNEL_NAMES`] order.
+    fn from_channels(ch: &[f64; NCH]) -> Self;
+    /// The 14 channels in [`CHANNEL_NAMES`] order.
+    fn to_channels(&self) -> [f64; NCH];
+    /// Magnitude `|A_k|` of the drive harmonic `k` (1..=3; `NaN` otherwise).
+    fn x_abs(&self, k: usize) -> f64;
+    /// Magnitude `|B_k|` of the sense harmonic `k` (1..=3; `NaN` otherwise).
+    fn y_abs(&self, k: usize) -> f64;
+    /// The core's input in precision `T` (each channel rounded once from `f64`).
+    fn to_precision<T: Real>(&self) -> Lockin<T>;
 }
 
-impl LockinOut {
-    /// Builds the output from the 14 channels in [`CHANNEL_NAMES`] order.
-    pub fn from_channels(ch: &[f64; NCH]) -> Self {
-        Self {
-            x0: ch[0],
-            x: [(ch[1], ch[2]), (ch[3], ch[4]), (ch[5], ch[6])],
-            y0: ch[7],
-            y: [(ch[8], ch[9]), (ch[10], ch[11]), (ch[12], ch[13])],
+/// `|z|` as `hypot` (the simulator's amplitudes; `Cplx::abs` squares first).
+fn harmonic_abs(h: &[Cplx<f64>; 3], k: usize) -> f64 {
+    match k.checked_sub(1).and_then(|i| h.get(i)) {
+        Some(z) => z.re.hypot(z.im),
+        None => f64::NAN,
+    }
+}
+
+impl LockinExt for Lockin<f64> {
+    fn from_channels(ch: &[f64; NCH]) -> Self {
+        let c = |i: usize| Cplx::new(ch[i], ch[i + 1]);
+        Lockin {
+            x0_um: ch[0],
+            x_um: [c(1), c(3), c(5)],
+            y0_um: ch[7],
+            y_um: [c(8), c(10), c(12)],
         }
     }
 
-    /// The 14 channels in [`CHANNEL_NAMES`] order.
-    pub fn to_channels(&self) -> [f64; NCH] {
+    fn to_channels(&self) -> [f64; NCH] {
+        let (x, y) = (&self.x_um, &self.y_um);
         [
-            self.x0,
-            self.x[0].0,
-            self.x[0].1,
-            self.x[1].0,
-            self.x[1].1,
-            self.x[2].0,
-            self.x[2].1,
-            self.y0,
-            self.y[0].0,
-            self.y[0].1,
-            self.y[1].0,
-            self.y[1].1,
-            self.y[2].0,
-            self.y[2].1,
+            self.x0_um, x[0].re, x[0].im, x[1].re, x[1].im, x[2].re, x[2].im, self.y0_um, y[0].re,
+            y[0].im, y[1].re, y[1].im, y[2].re, y[2].im,
         ]
     }
 
-    /// Magnitude `|A_k|` of the drive harmonic `k` (1..=3).
-    ///
-    /// # Panics
-    /// If `k` is not in 1..=3.
-    pub fn x_abs(&self, k: usize) -> f64 {
-        let (re, im) = self.x[k - 1];
-        re.hypot(im)
+    fn x_abs(&self, k: usize) -> f64 {
+        harmonic_abs(&self.x_um, k)
     }
 
-    /// Magnitude `|B_k|` of the sense harmonic `k` (1..=3).
-    ///
-    /// # Panics
-    /// If `k` is not in 1..=3.
-    pub fn y_abs(&self, k: usize) -> f64 {
-        let (re, im) = self.y[k - 1];
-        re.hypot(im)
+    fn y_abs(&self, k: usize) -> f64 {
+        harmonic_abs(&self.y_um, k)
+    }
+
+    fn to_precision<T: Real>(&self) -> Lockin<T> {
+        let c = |z: Cplx<f64>| Cplx::new(T::from_f64(z.re), T::from_f64(z.im));
+        Lockin {
+            x0_um: T::from_f64(self.x0_um),
+            x_um: self.x_um.map(c),
+            y0_um: T::from_f64(self.y0_um),
+            y_um: self.y_um.map(c),
+        }
     }
 }
 

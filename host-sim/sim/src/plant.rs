@@ -43,7 +43,7 @@
 //! 0 no random numbers are drawn and the run is exactly deterministic.
 
 use crate::effects::{ES_C3, Effects};
-use crate::lockin::{BlockLpf, LockinOut, mixer_products};
+use crate::lockin::{BlockLpf, LockinExt, LockinOut, mixer_products};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -207,6 +207,7 @@ impl Noise {
 /// The simulated gyro: state of eq. (6), reference phase, lock-in filters and noise.
 ///
 /// ```
+/// use paragyro_simulator::lockin::LockinExt;
 /// use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 /// let cfg = SimConfig { noise_density: 0.0, ..SimConfig::default() };
 /// let mut sim = GyroSim::new(&cfg, [0.01, 0.0, 0.0, 0.0]).unwrap();

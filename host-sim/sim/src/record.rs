@@ -23,7 +23,9 @@
 //! * [`replay`] runs the core open-loop on a record; [`config_for`] is the core
 //!   configuration for a record of an unknown device.
 
-use paragyro_core::{Config, Cplx, Lockin, Real, Sample};
+use paragyro_core::{Config, Real, Sample};
+
+use crate::lockin::{LockinExt, LockinOut, NCH};
 
 mod error;
 mod read;
@@ -62,8 +64,11 @@ pub const HEADER_KEYS: [&str; 7] = [
     "pump_amp_ref_v",
 ];
 
-/// Number of required columns.
-pub const N_REQUIRED: usize = 19;
+/// Number of required columns: the time, the pump, the accelerations, then the lock-in.
+pub const N_REQUIRED: usize = N_HEAD + NCH;
+
+/// Number of required columns before the lock-in's.
+const N_HEAD: usize = 5;
 
 /// The required columns, in the order they are written.
 pub const REQUIRED_COLUMNS: [&str; N_REQUIRED] = [
@@ -164,14 +169,9 @@ pub struct RecordRow {
     pub ax_mps2: f64,
     /// Acceleration along the sense axis y, m/s².
     pub ay_mps2: f64,
-    /// Low-passed DC level of the drive displacement, µm.
-    pub x0_um: f64,
-    /// Drive harmonics k = 1, 2, 3: peak complex amplitude (re, im) against e^{−ikψ}, µm.
-    pub x_um: [(f64, f64); 3],
-    /// Low-passed DC level of the sense displacement, µm.
-    pub y0_um: f64,
-    /// Sense harmonics k = 1, 2, 3, µm.
-    pub y_um: [(f64, f64); 3],
+    /// The 14 lock-in channels, µm (columns `x0_um` … `y3_im_um`: the DC levels and the
+    /// peak complex amplitudes of harmonics 1, 2, 3 against e^{−ikψ}).
+    pub lockin: LockinOut,
     /// Temperature, °C (optional column).
     pub temp_c: Option<f64>,
     /// Known reference rate (rate table), °/s (optional column).
@@ -179,30 +179,19 @@ pub struct RecordRow {
 }
 
 impl RecordRow {
-    /// The required columns in [`REQUIRED_COLUMNS`] order.
+    /// The required columns in [`REQUIRED_COLUMNS`] order (the lock-in's in
+    /// [`crate::lockin::CHANNEL_NAMES`] order).
     pub fn required(&self) -> [f64; N_REQUIRED] {
-        let (x, y) = (&self.x_um, &self.y_um);
-        [
+        let mut v = [0.0; N_REQUIRED];
+        v[..N_HEAD].copy_from_slice(&[
             self.t_s,
             self.pump_hz,
             self.pump_amp_v,
             self.ax_mps2,
             self.ay_mps2,
-            self.x0_um,
-            x[0].0,
-            x[0].1,
-            x[1].0,
-            x[1].1,
-            x[2].0,
-            x[2].1,
-            self.y0_um,
-            y[0].0,
-            y[0].1,
-            y[1].0,
-            y[1].1,
-            y[2].0,
-            y[2].1,
-        ]
+        ]);
+        v[N_HEAD..].copy_from_slice(&self.lockin.to_channels());
+        v
     }
 
     /// A row from the required columns in [`REQUIRED_COLUMNS`] order and the optional ones.
@@ -211,49 +200,40 @@ impl RecordRow {
         temp_c: Option<f64>,
         rate_ref_dps: Option<f64>,
     ) -> Self {
+        let mut ch = [0.0; NCH];
+        ch.copy_from_slice(&v[N_HEAD..]);
         RecordRow {
             t_s: v[0],
             pump_hz: v[1],
             pump_amp_v: v[2],
             ax_mps2: v[3],
             ay_mps2: v[4],
-            x0_um: v[5],
-            x_um: [(v[6], v[7]), (v[8], v[9]), (v[10], v[11])],
-            y0_um: v[12],
-            y_um: [(v[13], v[14]), (v[15], v[16]), (v[17], v[18])],
+            lockin: LockinOut::from_channels(&ch),
             temp_c,
             rate_ref_dps,
         }
     }
 
     /// The core's input for this sample: s = (pump_amp_v / pump_amp_ref_v)², lock-in in µm
-    /// as recorded (the core's [`Lockin`] is in µm), accelerations in m/s². NaN passes
-    /// through (the core flags and skips such a sample).
+    /// as recorded (the core's [`paragyro_core::Lockin`] is in µm), accelerations in m/s².
+    /// NaN passes through (the core flags and skips such a sample).
     pub fn to_sample<T: Real>(&self, header: &RecordHeader) -> Sample<T> {
-        let c = |p: (f64, f64)| Cplx::new(T::from_f64(p.0), T::from_f64(p.1));
         Sample {
-            lockin: Lockin {
-                x0_um: T::from_f64(self.x0_um),
-                x_um: [c(self.x_um[0]), c(self.x_um[1]), c(self.x_um[2])],
-                y0_um: T::from_f64(self.y0_um),
-                y_um: [c(self.y_um[0]), c(self.y_um[1]), c(self.y_um[2])],
-            },
+            lockin: self.lockin.to_precision::<T>(),
             accel_mps2: [T::from_f64(self.ax_mps2), T::from_f64(self.ay_mps2)],
             pump_hz: self.pump_hz,
             pump_scale: Sample::<T>::pump_scale_from_volts(self.pump_amp_v, header.pump_amp_ref_v),
         }
     }
 
-    /// |x_k| (k = 1..=3), µm.
+    /// |x_k| (k = 1..=3; `NaN` otherwise), µm.
     pub fn x_abs(&self, k: usize) -> f64 {
-        let (re, im) = self.x_um[k - 1];
-        re.hypot(im)
+        self.lockin.x_abs(k)
     }
 
-    /// |y_k| (k = 1..=3), µm.
+    /// |y_k| (k = 1..=3; `NaN` otherwise), µm.
     pub fn y_abs(&self, k: usize) -> f64 {
-        let (re, im) = self.y_um[k - 1];
-        re.hypot(im)
+        self.lockin.y_abs(k)
     }
 }
 

@@ -10,11 +10,11 @@ use std::time::Instant;
 
 use anyhow::Context;
 use paragyro_core::physics::{Physical, physical_from_theta};
-use paragyro_core::{Config, Cplx, Estimator, Lockin, Real, Sample, StepOutput};
+use paragyro_core::{Config, Estimator, Real, Sample, StepOutput};
 use std::collections::BTreeMap;
 
 use crate::effects::Effects;
-use crate::lockin::LockinOut;
+use crate::lockin::{LockinExt, LockinOut};
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, PumpProfileSpec, Scenario};
 use crate::summary::{Convergence, PhysicalValues, RunCounters, RunSummary, ThetaPair};
@@ -274,14 +274,8 @@ pub fn closed_loop_with<T: Real>(
         let pa = sc.plant_at(t);
         let s_k = sc.pump_scale_at(t) * scale_mult;
         let li = sim.lockin();
-        let c = |p: (f64, f64)| Cplx::new(T::from_f64(p.0), T::from_f64(p.1));
         let sample = Sample {
-            lockin: Lockin {
-                x0_um: T::from_f64(li.x0),
-                x_um: [c(li.x[0]), c(li.x[1]), c(li.x[2])],
-                y0_um: T::from_f64(li.y0),
-                y_um: [c(li.y[0]), c(li.y[1]), c(li.y[2])],
-            },
+            lockin: li.to_precision::<T>(),
             accel_mps2: [
                 T::from_f64(pa.accel_x * accel_si),
                 T::from_f64(pa.accel_y * accel_si),

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use paragyro_core::Sample;
+use paragyro_core::{Cplx, Sample};
 use paragyro_simulator::record::{
     self, EffectSpec, OPTIONAL_COLUMNS, REQUIRED_COLUMNS, Record, RecordErrorKind, RecordHeader,
     RecordOptions, RecordRow, parse_record, read_record, replay, simulate_record,
@@ -203,7 +203,10 @@ fn valid_text_parses() {
     assert_eq!(rec.rows.len(), 200);
     assert!(rec.warnings.is_empty());
     assert_eq!(rec.header.lockin_lpf_order, 4);
-    assert_eq!(rec.rows[3].x_um[0], (-0.75 + 3e-4, -0.5 + 3e-4));
+    assert_eq!(
+        rec.rows[3].lockin.x_um[0],
+        Cplx::new(-0.75 + 3e-4, -0.5 + 3e-4)
+    );
 }
 
 #[test]
@@ -536,8 +539,8 @@ fn unknown_column_warns_and_data_is_read() {
     assert_eq!(rec.header.extra, vec![("operator".into(), "jd".into())]);
     let r = &rec.rows[4];
     let want = data_row(4);
-    assert_eq!(r.x0_um, want[5].parse::<f64>().unwrap());
-    assert_eq!(r.y0_um, want[12].parse::<f64>().unwrap());
+    assert_eq!(r.lockin.x0_um, want[5].parse::<f64>().unwrap());
+    assert_eq!(r.lockin.y0_um, want[12].parse::<f64>().unwrap());
     assert_eq!(r.ax_mps2, 98.0665);
     assert_eq!(r.temp_c, Some(21.5));
     assert_eq!(rec.rows[5].temp_c, None);
@@ -553,7 +556,7 @@ fn nan_data_rows_are_kept() {
     });
     let rec = parse_record(&text, "rec.csv").unwrap();
     assert_eq!(rec.rows.len(), 10);
-    assert!(rec.rows[3].y_um[0].0.is_nan());
+    assert!(rec.rows[3].lockin.y_um[0].re.is_nan());
     assert_eq!(rec.warnings.len(), 1);
     assert!(
         rec.warnings[0].starts_with("rec.csv:12: 2 row(s) have NaN"),
@@ -594,7 +597,7 @@ fn to_sample_converts_pump_voltage_to_scale() {
         pump_amp_v: 2.2,
         ..row
     };
-    row.x_um[0] = (1.5, -0.5);
+    row.lockin.x_um[0] = Cplx::new(1.5, -0.5);
     row.ax_mps2 = 9.81;
     let s: Sample<f64> = row.to_sample(&h);
     assert!((s.pump_scale - 1.21).abs() < 1e-15);

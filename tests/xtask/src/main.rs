@@ -80,21 +80,31 @@ fn setup() -> Result<(), String> {
         run("apt-get", &["update", "-qq"])?;
         run_env(
             "apt-get",
-            &["install", "-y", "-qq", "--no-install-recommends", "qemu-system-arm"],
+            &[
+                "install",
+                "-y",
+                "-qq",
+                "--no-install-recommends",
+                "qemu-system-arm",
+            ],
             &[("DEBIAN_FRONTEND", "noninteractive")],
         )?;
     } else {
-        return Err("qemu-system-arm is missing and cannot be installed from here (not root, \
+        return Err(
+            "qemu-system-arm is missing and cannot be installed from here (not root, \
                     or no apt-get): install it (Debian/Ubuntu: `apt-get install \
                     qemu-system-arm`), or run `cargo xtask test --no-install` with \
                     PARAGYRO_SKIP_QEMU=1 to skip the firmware-in-QEMU test"
-            .into());
+                .into(),
+        );
     }
 
     if found("defmt-print") {
         say("defmt-print: installed");
     } else {
-        say(&format!("defmt-print: installing it (cargo install --locked {DEFMT_PRINT})"));
+        say(&format!(
+            "defmt-print: installing it (cargo install --locked {DEFMT_PRINT})"
+        ));
         run("cargo", &["install", "--locked", "--quiet", DEFMT_PRINT])?;
     }
     Ok(())

@@ -132,7 +132,10 @@ pub fn write_run(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>, Failure
 
 /// "  path\n" per file.
 pub fn file_list(files: &[PathBuf]) -> String {
-    files.iter().map(|f| format!("  {}\n", f.display())).collect()
+    files
+        .iter()
+        .map(|f| format!("  {}\n", f.display()))
+        .collect()
 }
 
 /// Runs with an indicatif bar on stderr (only when `show` and the run is long enough).

@@ -2,6 +2,7 @@
 //! verdict's effect(s) at their fitted sizes over the held-out span, its output error
 //! against the model's, and the envelopes for the plot.
 
+use paragyro_core::Cplx;
 use paragyro_core::physics::rate_dps_from_gamma;
 use paragyro_simulator::effects::{EffectSpec, Signature};
 use serde::{Deserialize, Serialize};
@@ -143,20 +144,20 @@ pub(crate) fn how_far(
     let mut envelopes = Vec::new();
     for k in (hold_start..=last).step_by(stride) {
         let r = &rec.rows[k];
-        let h = |v: (f64, f64)| v.0.hypot(v.1);
-        let d = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0 * l0).hypot(a.1 - b.1 * l0);
+        let h = |v: Cplx<f64>| v.re.hypot(v.im);
+        let d = |a: Cplx<f64>, b: Cplx<f64>| (a.re - b.re * l0).hypot(a.im - b.im * l0);
         envelopes.push([
             rows.t[k],
-            h(r.x_um[0]),
-            h(r.y_um[0]),
-            h(before[k].x[0]) * l0,
-            h(before[k].y[0]) * l0,
-            h(after[k].x[0]) * l0,
-            h(after[k].y[0]) * l0,
-            d(r.x_um[0], before[k].x[0]),
-            d(r.y_um[0], before[k].y[0]),
-            d(r.x_um[0], after[k].x[0]),
-            d(r.y_um[0], after[k].y[0]),
+            h(r.lockin.x_um[0]),
+            h(r.lockin.y_um[0]),
+            h(before[k].x_um[0]) * l0,
+            h(before[k].y_um[0]) * l0,
+            h(after[k].x_um[0]) * l0,
+            h(after[k].y_um[0]) * l0,
+            d(r.lockin.x_um[0], before[k].x_um[0]),
+            d(r.lockin.y_um[0], before[k].y_um[0]),
+            d(r.lockin.x_um[0], after[k].x_um[0]),
+            d(r.lockin.y_um[0], after[k].y_um[0]),
         ]);
     }
     Ok(Far {

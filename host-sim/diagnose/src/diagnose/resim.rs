@@ -4,6 +4,7 @@
 
 use std::f64::consts::TAU;
 
+use paragyro_core::Cplx;
 use paragyro_core::physics::theta_from_physical;
 use paragyro_simulator::effects::{EffectSpec, Effects, T_REF_C};
 use paragyro_simulator::lockin::LockinOut;
@@ -49,7 +50,7 @@ impl Resim<'_> {
         let psi = psi_of(rec);
         let (k0, k1) = (span.start, span.end.min(rec.rows.len()));
         let mid = k0 + (k1 - k0) / 2;
-        let halves = crate::par::try_map(
+        let halves = paragyro_simulator::par::try_map(
             &[(k0, mid), (mid, k1)],
             |(a, b)| format!("the re-simulation of samples {a}..{b}"),
             |&(a, b)| self.chunk(&psi, a, b),
@@ -59,17 +60,17 @@ impl Resim<'_> {
             // the first half starts from rest: put it on the record's branch
             let (mut same, mut flip) = (0.0, 0.0);
             for k in mid / 2..mid {
-                let x = rec.rows[k].x_um[0];
-                let o = out[k].x[0];
-                same += (x.0 - o.0).powi(2) + (x.1 - o.1).powi(2);
-                flip += (x.0 + o.0).powi(2) + (x.1 + o.1).powi(2);
+                let x = rec.rows[k].lockin.x_um[0];
+                let o = out[k].x_um[0];
+                same += (x.re - o.re).powi(2) + (x.im - o.im).powi(2);
+                flip += (x.re + o.re).powi(2) + (x.im + o.im).powi(2);
             }
             if flip < same {
                 for o in out.iter_mut().take(mid) {
-                    o.x[0] = (-o.x[0].0, -o.x[0].1);
-                    o.x[2] = (-o.x[2].0, -o.x[2].1);
-                    o.y[0] = (-o.y[0].0, -o.y[0].1);
-                    o.y[2] = (-o.y[2].0, -o.y[2].1);
+                    for k in [0, 2] {
+                        o.x_um[k] = Cplx::new(-o.x_um[k].re, -o.x_um[k].im);
+                        o.y_um[k] = Cplx::new(-o.y_um[k].re, -o.y_um[k].im);
+                    }
                 }
             }
         }
@@ -125,8 +126,16 @@ pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
         if k >= 20 {
             let v = |o: &LockinOut| {
                 [
-                    o.x0, o.x[0].0, o.x[0].1, o.x[2].0, o.x[2].1, o.y0, o.y[0].0, o.y[0].1,
-                    o.y[2].0, o.y[2].1,
+                    o.x0_um,
+                    o.x_um[0].re,
+                    o.x_um[0].im,
+                    o.x_um[2].re,
+                    o.x_um[2].im,
+                    o.y0_um,
+                    o.y_um[0].re,
+                    o.y_um[0].im,
+                    o.y_um[2].re,
+                    o.y_um[2].im,
                 ]
             };
             if let Some(p) = &prev {
@@ -153,18 +162,18 @@ pub fn output_error(
 ) -> OutputError {
     let l0 = rec.header.l0_um;
     let err = |k: usize| -> [f64; 10] {
-        let (r, o) = (&rec.rows[k], &sim[k]);
+        let (r, o) = (&rec.rows[k].lockin, &sim[k]);
         [
-            r.x0_um - o.x0 * l0,
-            r.x_um[0].0 - o.x[0].0 * l0,
-            r.x_um[0].1 - o.x[0].1 * l0,
-            r.x_um[2].0 - o.x[2].0 * l0,
-            r.x_um[2].1 - o.x[2].1 * l0,
-            r.y0_um - o.y0 * l0,
-            r.y_um[0].0 - o.y[0].0 * l0,
-            r.y_um[0].1 - o.y[0].1 * l0,
-            r.y_um[2].0 - o.y[2].0 * l0,
-            r.y_um[2].1 - o.y[2].1 * l0,
+            r.x0_um - o.x0_um * l0,
+            r.x_um[0].re - o.x_um[0].re * l0,
+            r.x_um[0].im - o.x_um[0].im * l0,
+            r.x_um[2].re - o.x_um[2].re * l0,
+            r.x_um[2].im - o.x_um[2].im * l0,
+            r.y0_um - o.y0_um * l0,
+            r.y_um[0].re - o.y_um[0].re * l0,
+            r.y_um[0].im - o.y_um[0].im * l0,
+            r.y_um[2].re - o.y_um[2].re * l0,
+            r.y_um[2].im - o.y_um[2].im * l0,
         ]
     };
     let (mut ex, mut ey, mut nn, mut dd) = (0.0, 0.0, 0.0, 0.0);
@@ -177,9 +186,9 @@ pub fn output_error(
             dd += e.iter().zip(p).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         }
         prev = Some(e);
-        let r = &rec.rows[k];
+        let r = &rec.rows[k].lockin;
         for v in [r.x_um[0], r.x_um[2], r.y_um[0], r.y_um[2]] {
-            nn += v.0 * v.0 + v.1 * v.1;
+            nn += v.re * v.re + v.im * v.im;
         }
         nn += r.x0_um * r.x0_um + r.y0_um * r.y0_um;
     }
@@ -195,15 +204,16 @@ pub fn output_error(
 
 /// State [X, X', Y, Y'] reconstructed from a record row's harmonics at phase ψ.
 fn state_of(r: &paragyro_simulator::record::RecordRow, psi: f64, om: f64, l0: f64) -> [f64; 4] {
+    let r = &r.lockin;
     let (mut x, mut xd, mut y, mut yd) = (r.x0_um / l0, 0.0, r.y0_um / l0, 0.0);
     for k in 0..3 {
         let kf = (k + 1) as f64;
         let (s, c) = (kf * psi).sin_cos();
         let (a, b) = (r.x_um[k], r.y_um[k]);
-        x += (a.0 * c - a.1 * s) / l0;
-        xd += kf * om * (-a.0 * s - a.1 * c) / l0;
-        y += (b.0 * c - b.1 * s) / l0;
-        yd += kf * om * (-b.0 * s - b.1 * c) / l0;
+        x += (a.re * c - a.im * s) / l0;
+        xd += kf * om * (-a.re * s - a.im * c) / l0;
+        y += (b.re * c - b.im * s) / l0;
+        yd += kf * om * (-b.re * s - b.im * c) / l0;
     }
     [x, xd, y, yd]
 }
@@ -299,11 +309,12 @@ pub(crate) fn with_lockin(rec: &Record, li: &[LockinOut]) -> Record {
     let mut r = rec.clone();
     let l0 = rec.header.l0_um;
     for (row, o) in r.rows.iter_mut().zip(li) {
-        row.x0_um = o.x0 * l0;
-        row.y0_um = o.y0 * l0;
+        let li = &mut row.lockin;
+        li.x0_um = o.x0_um * l0;
+        li.y0_um = o.y0_um * l0;
         for k in 0..3 {
-            row.x_um[k] = (o.x[k].0 * l0, o.x[k].1 * l0);
-            row.y_um[k] = (o.y[k].0 * l0, o.y[k].1 * l0);
+            li.x_um[k] = Cplx::new(o.x_um[k].re * l0, o.x_um[k].im * l0);
+            li.y_um[k] = Cplx::new(o.y_um[k].re * l0, o.y_um[k].im * l0);
         }
     }
     r

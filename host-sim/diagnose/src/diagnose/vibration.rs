@@ -130,7 +130,7 @@ pub(crate) fn scan_beat(
     let grid: Vec<f64> = (-steps..=steps)
         .map(|i| i as f64 * VIB_BEAT_STEP_HZ)
         .collect();
-    let scores = crate::par::try_map(
+    let scores = paragyro_simulator::par::try_map(
         &grid,
         |b| format!("the vibration's beat scan at {b:+.1} Hz"),
         |&b| Ok((b, scan(b).0)),
@@ -149,7 +149,7 @@ pub(crate) fn scan_beat(
     for _ in 0..8 {
         let m1 = lo + 0.382 * (hi - lo);
         let m2 = lo + 0.618 * (hi - lo);
-        let s = crate::par::try_map(
+        let s = paragyro_simulator::par::try_map(
             &[m1, m2],
             |b| format!("the vibration's beat refinement at {b:+.4} Hz"),
             |&b| Ok(scan(b).0),

@@ -15,7 +15,7 @@ use super::plots::plot_sweep;
 use super::sweeps::hysteresis_intervals;
 use crate::complex::CplxExt;
 use crate::numerics::{BranchPoint, folds};
-use crate::par::{par_map, try_par_map};
+use paragyro_simulator::par::{par_map, try_par_map};
 
 /// Lock-in fundamentals `(A1, B1)` of the full-rate plant ([`GyroSim`], 128 steps per
 /// period, no noise) after `seconds` at constant ω from `X(0) = 0.01`.
@@ -41,7 +41,7 @@ pub fn full_sim_envelopes(
         sim.advance(&model.theta, &u, &u);
     }
     let o = sim.lockin();
-    Ok((Cplx::new(o.x[0].0, o.x[0].1), Cplx::new(o.y[0].0, o.y[0].1)))
+    Ok((o.x_um[0], o.y_um[0]))
 }
 
 /// The stable steady state closest to the envelopes `(a, b)` (up to the ± symmetry).

@@ -16,7 +16,7 @@ use super::regimes::{
 };
 use super::rk4::{Rk4Check, rk4_checks};
 use crate::numerics::BranchPoint;
-use crate::par::par_map;
+use paragyro_simulator::par::par_map;
 
 /// `paper001.json`: what [`write_paper001_report`] computes.
 #[derive(Clone, Debug, Serialize)]

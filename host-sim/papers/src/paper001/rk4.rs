@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use super::model::{Params, eq19_rhs, slow_from_state, state_from_slow};
 use super::regimes::{Stationary, StationaryRecord, stationary_points};
-use crate::par::try_par_map;
+use paragyro_simulator::par::try_par_map;
 
 /// RK4 steps per period 2π/μ of the direct integration.
 pub const STEPS_PER_PERIOD: usize = 64;

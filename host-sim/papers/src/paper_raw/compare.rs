@@ -11,7 +11,7 @@ use super::config::{LambdaReading, RawConfig, Segment};
 use super::records::rel_err;
 use super::simulate::{RawRun, simulate};
 use super::switch::segment_summaries;
-use crate::par::try_par_map;
+use paragyro_simulator::par::try_par_map;
 
 /// One estimator configuration in the comparison.
 #[derive(Clone, Debug, Serialize)]

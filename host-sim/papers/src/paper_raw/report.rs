@@ -16,7 +16,7 @@ use super::plots::{Quantity, physical_quantity, plot_est_truth, plot_literal, th
 use super::simulate::{RawRecord, RawRun, simulate};
 use super::switch::{Pump, SwitchOptions, SwitchResult, paper_sets, paper_switch};
 use super::tables::tables_md;
-use crate::par::try_par_map;
+use paragyro_simulator::par::try_par_map;
 
 /// The finer step of the extra ±50 % runs (4× the plant's): enough for the explicit RK4 to
 /// survive the switches with λ = 0.2/τ.

@@ -1,6 +1,12 @@
 //! Tests of the simulated gyro: the integrator against references, the phase, the noise, the effects.
 
 use super::*;
+use paragyro_core::Cplx;
+
+/// A complex lock-in channel as (re, im).
+fn tup(z: Cplx<f64>) -> (f64, f64) {
+    (z.re, z.im)
+}
 use std::f64::consts::PI;
 
 fn quiet(spp: usize, omega_max: f64) -> SimConfig {
@@ -120,8 +126,8 @@ fn steady_state_table2() {
             "case {i}: lock-in |A1| = {a1:.5}, |B1| = {b1:.5} (|A3| = {:.3e}, X0 = {:.4e}, Y0 = {:.4e}); \
              prototype estimator |X| = {qx:.5} (FINDINGS {px}), |Y| = {qy:.5} (FINDINGS {py})",
             o.x_abs(3),
-            o.x0,
-            o.y0
+            o.x0_um,
+            o.y0_um
         );
         assert!((qx / px - 1.0).abs() < 1e-3, "prototype |X| {qx} vs {px}");
         assert!((qy / py - 1.0).abs() < 1e-3, "prototype |Y| {qy} vs {py}");
@@ -170,13 +176,13 @@ fn noise_levels_and_seeding() {
     let s_dc = 1e-6 * enbw.sqrt();
     let s_h = 2f64.sqrt() * s_dc;
     let meas = [
-        ("X0", std(&|o| o.x0), s_dc, 1.2e-5),
-        ("Y0", std(&|o| o.y0), s_dc, 1.2e-5),
-        ("ReA1", std(&|o| o.x[0].0), s_h, 1.7e-5),
-        ("ImA1", std(&|o| o.x[0].1), s_h, 1.7e-5),
-        ("ReB1", std(&|o| o.y[0].0), s_h, 1.7e-5),
-        ("ImB1", std(&|o| o.y[0].1), s_h, 1.7e-5),
-        ("ReA3", std(&|o| o.x[2].0), s_h, 1.7e-5),
+        ("X0", std(&|o| o.x0_um), s_dc, 1.2e-5),
+        ("Y0", std(&|o| o.y0_um), s_dc, 1.2e-5),
+        ("ReA1", std(&|o| o.x_um[0].re), s_h, 1.7e-5),
+        ("ImA1", std(&|o| o.x_um[0].im), s_h, 1.7e-5),
+        ("ReB1", std(&|o| o.y_um[0].re), s_h, 1.7e-5),
+        ("ImB1", std(&|o| o.y_um[0].im), s_h, 1.7e-5),
+        ("ReA3", std(&|o| o.x_um[2].re), s_h, 1.7e-5),
     ];
     for (name, got, theory, findings) in meas {
         println!("noise std {name}: {got:.4e} (theory {theory:.4e}, FINDINGS {findings:.1e})");
@@ -205,7 +211,7 @@ fn noise_levels_and_seeding() {
     assert!(
         a.iter()
             .zip(&c)
-            .all(|(p, q)| p.x0 != q.x0 && p.y[0] != q.y[0])
+            .all(|(p, q)| p.x0_um != q.x0_um && p.y_um[0] != q.y_um[0])
     );
     assert_eq!(a[..], all[..20]);
 }
@@ -553,14 +559,14 @@ fn feedthrough_signature_at_rest() {
     };
     run(&mut sim, &th_rest(), &u, 20);
     let o = sim.lockin();
-    assert!((o.y0 - c).abs() < 1e-6 * c.max(1.0), "{}", o.y0);
+    assert!((o.y0_um - c).abs() < 1e-6 * c.max(1.0), "{}", o.y0_um);
     assert!(
-        (o.y[1].0 - c).abs() < 1e-3 * c && o.y[1].1.abs() < 1e-3 * c,
+        (o.y_um[1].re - c).abs() < 1e-3 * c && o.y_um[1].im.abs() < 1e-3 * c,
         "{:?}",
-        o.y[1]
+        tup(o.y_um[1])
     );
-    assert!(o.y[0].0.hypot(o.y[0].1) < 1e-9 && o.y[2].0.hypot(o.y[2].1) < 1e-9);
-    assert!(o.x0.abs() < 1e-12);
+    assert!(o.y_um[0].re.hypot(o.y_um[0].im) < 1e-9 && o.y_um[2].re.hypot(o.y_um[2].im) < 1e-9);
+    assert!(o.x0_um.abs() < 1e-12);
     let mut sim = GyroSim::new(&quiet(128, 1.05), [0.0, 0.0, 0.5, 0.0]).unwrap();
     let mut ref_sim = sim.clone();
     sim.set_effects(
@@ -573,7 +579,7 @@ fn feedthrough_signature_at_rest() {
     // (the lock-in started at rest on the unscaled Y: let that transient decay)
     run(&mut sim, &th_rest(), &u, 25);
     run(&mut ref_sim, &th_rest(), &u, 25);
-    let (a, b) = (sim.lockin().y[0], ref_sim.lockin().y[0]);
+    let (a, b) = (tup(sim.lockin().y_um[0]), tup(ref_sim.lockin().y_um[0]));
     let tol = 1e-6 * b.0.hypot(b.1);
     assert!(
         (a.0 - 1.01 * b.0).abs() < tol && (a.1 - 1.01 * b.1).abs() < tol,

@@ -90,10 +90,7 @@ pub fn simulate_record_with(
                 pump_amp_v: SIM_PUMP_AMP_REF_V * ls.sample.pump_scale.sqrt(),
                 ax_mps2: ls.sample.accel_mps2[0],
                 ay_mps2: ls.sample.accel_mps2[1],
-                x0_um: li.x0,
-                x_um: li.x,
-                y0_um: li.y0,
-                y_um: li.y,
+                lockin: *li,
                 temp_c: temp.map(|_| (dev.temp_c(ls.t_s, sc.duration_s) * 100.0).round() / 100.0),
                 rate_ref_dps: opts.rate_table.then_some(ls.plant.rate_dps),
             });

@@ -1,6 +1,8 @@
-//! Parallel maps on rayon's pool whose results keep the input order and whose panicking
-//! jobs become errors: a worker that panics is reported to the caller (and so to the
-//! user), never dropped or replaced by a default.
+//! Parallel maps on rayon's pool for the host crates (simulator runs, diagnoses, blind
+//! benchmark, the papers' sweeps): results keep the input order, and a worker that
+//! panics becomes an error naming its item — never a dropped or default result. Every job
+//! runs to its end; the error returned is the first in item order (rayon's own `Result`
+//! collection would return whichever failed first in time), so a run is reproducible.
 
 use std::any::Any;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -17,6 +19,25 @@ fn panic_message(p: &(dyn Any + Send)) -> String {
     } else {
         "a panic without a message".into()
     }
+}
+
+/// `f` over `items` (by reference) in parallel, results in the items' order. The first
+/// error in item order is returned; a panic is an error naming the item by `name`.
+pub fn try_map<T, R, F, N>(items: &[T], name: N, f: F) -> Result<Vec<R>>
+where
+    T: Sync,
+    R: Send,
+    F: Fn(&T) -> Result<R> + Sync,
+    N: Fn(&T) -> String + Sync,
+{
+    let results: Vec<Result<R>> = items
+        .par_iter()
+        .map(|it| {
+            catch_unwind(AssertUnwindSafe(|| f(it)))
+                .unwrap_or_else(|p| Err(anyhow!("{} panicked: {}", name(it), panic_message(&*p))))
+        })
+        .collect();
+    results.into_iter().collect()
 }
 
 /// `f` on every item in parallel, results in the order of `items`. The first error (in
@@ -88,5 +109,45 @@ mod tests {
             }
         });
         assert_eq!(r.unwrap_err().to_string(), "bad 3");
+    }
+
+    #[test]
+    fn results_keep_the_items_order() {
+        let v: Vec<u64> = (0..1000).collect();
+        let out = try_map(&v, |i| format!("item {i}"), |&i| Ok(i * i)).unwrap();
+        assert_eq!(out, v.iter().map(|i| i * i).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_panicking_item_is_an_error_that_names_it() {
+        let v: Vec<u32> = (0..64).collect();
+        let err = try_map(
+            &v,
+            |i| format!("item {i}"),
+            |&i| {
+                if i == 37 {
+                    panic!("boom at {i}");
+                }
+                Ok(i)
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(err, "item 37 panicked: boom at 37");
+    }
+
+    #[test]
+    fn an_error_is_returned_not_dropped() {
+        let v: Vec<u32> = (0..8).collect();
+        let err = try_map(
+            &v,
+            |i| format!("item {i}"),
+            |&i| {
+                anyhow::ensure!(i != 5, "item {i} is bad");
+                Ok(i)
+            },
+        )
+        .unwrap_err();
+        assert_eq!(err.to_string(), "item 5 is bad");
     }
 }
