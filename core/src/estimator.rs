@@ -52,7 +52,7 @@ impl Config {
 
 impl ValidConfig<'_> {
     /// Builds the runtime estimator in precision `T` (infallible: validated).
-    #[inline(always)] // built in its caller's destination (stack, docs/firmware.md)
+    #[inline(always)] // built in its caller's destination (stack, firmware/README.md)
     pub fn build<T: Real>(self) -> Estimator<T> {
         let mut e = Estimator::blank();
         e.rebuild(self);

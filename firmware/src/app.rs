@@ -510,7 +510,7 @@ where
     /// constant, so the App is written straight into the caller's place. It must be
     /// [`App::configure`]d before [`App::start`] (which fails until then: the blank
     /// estimator's pump is 0 Hz, outside every guard). The boards build their App this
-    /// way so that the estimator is designed in place, not moved (stack, docs/firmware.md).
+    /// way so that the estimator is designed in place, not moved (stack, firmware/README.md).
     #[inline(never)]
     pub fn unconfigured(chips: Chips<AX, AY, XL, DDS>) -> Self {
         Self {

@@ -20,7 +20,7 @@
 #[cfg(not(target_os = "none"))]
 fn main() {
     eprintln!(
-        "paragyro-firmware: build with --target thumbv7em-none-eabihf (see docs/firmware.md)"
+        "paragyro-firmware: build with --target thumbv7em-none-eabihf (see firmware/README.md)"
     );
 }
 

@@ -1,6 +1,6 @@
 //! The firmware's replay table: a simulated record in a compact binary form that the QEMU
 //! board serves through its replay devices ([`crate::replay`]), written on the host by
-//! `paragyro-fw-replay` (host-sim/fw-replay/, docs/firmware.md), which takes every
+//! `paragyro-fw-replay` (host-sim/fw-replay/, firmware/README.md), which takes every
 //! layout constant, slot index and the hash from this module.
 //!
 //! # Format (`PGFWRPL1`, little-endian)
@@ -43,7 +43,7 @@
 //!
 //! The pump columns are the *record's* pump: the replay is open loop (the firmware's own
 //! DDS command is captured and compared with the record's next pump, but the core is told
-//! the pump that produced the lock-in data; see docs/firmware.md).
+//! the pump that produced the lock-in data; see firmware/README.md).
 
 use paragyro_core::Config;
 use paragyro_core::config::PumpProfile;

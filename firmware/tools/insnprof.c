@@ -4,7 +4,7 @@
    Derived from shared/tools/qemu-insncount/insncount.c (same hand-declared v1 API).
    Build: gcc -shared -fPIC -O2 -o libinsnprof.so insnprof.c
    Use:   qemu-system-arm ... -plugin ./libinsnprof.so,out=/tmp/prof.txt -d plugin
-   scripts/fw-profile.sh maps the addresses to functions (llvm-nm) and groups them. */
+   firmware/scripts/fw-profile.sh maps the addresses to functions (llvm-nm) and groups them. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>

@@ -1,11 +1,11 @@
-//! The firmware in QEMU against the host (docs/firmware.md).
+//! The firmware in QEMU against the host (firmware/README.md).
 //!
 //! * `replay_table_regenerates`: the checked-in replay table is what `paragyro-fw-replay
 //!   table` makes from `host-sim/scenarios/fw-drift-retune.toml` today (same generator
 //!   code, from `paragyro-fw-replay`), and the firmware's reader gets the scenario's core
 //!   configuration back from it.
 //! * `qemu_matches_host`: builds the `qemu` board with `tick-stream` and `capture` (its own
-//!   target directory, `target/fw-test`), runs it in QEMU (`scripts/qemu-run.sh`: exit 0
+//!   target directory, `target/fw-test`), runs it in QEMU (`firmware/scripts/qemu-run.sh`: exit 0
 //!   only if the run converged and retuned), and compares every tick's outputs with the
 //!   host running (a) the same firmware library over the same replay devices and (b) the
 //!   bare `paragyro_core::Estimator<f32>` on the frames decoded on the host: **bit for
@@ -256,11 +256,11 @@ fn qemu_matches_host() {
         .expect("cargo build of the firmware");
     assert!(status.success(), "firmware build failed");
     let elf = target_dir.join("thumbv7em-none-eabihf/release/paragyro-firmware");
-    let out = Command::new(root.join("scripts/qemu-run.sh"))
+    let out = Command::new(root.join("firmware/scripts/qemu-run.sh"))
         .arg(&elf)
         .output()
         .expect(
-            "scripts/qemu-run.sh (needs qemu-system-arm and defmt-print; \
+            "firmware/scripts/qemu-run.sh (needs qemu-system-arm and defmt-print; \
              PARAGYRO_SKIP_QEMU=1 skips this test)",
         );
     let text = String::from_utf8_lossy(&out.stdout);

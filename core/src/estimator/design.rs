@@ -5,7 +5,7 @@
 //! The linearisation point (θ_nom), the RLS factors, the detectors, the scheduler and the
 //! supervisor change at run time and live in the state (`super::state`). The design is
 //! built **in place** ([`Design::init`]), field by field, so that no design-sized
-//! temporary exists on the chip's stack (docs/firmware.md).
+//! temporary exists on the chip's stack (firmware/README.md).
 
 use crate::config::{Config, PumpProfile};
 use crate::lpf::ReplicaCoeffs;

@@ -24,7 +24,7 @@
 //! Features: `tick-stream` prints every tick's outputs (`TICK` lines, for the host
 //! comparison test), `capture` every tick's inputs (`CAP` lines, the capture mode).
 //!
-//! Profile mode (scripts/fw-profile.sh): built with `PARAGYRO_PROFILE_TICKS=N` in the
+//! Profile mode (firmware/scripts/fw-profile.sh): built with `PARAGYRO_PROFILE_TICKS=N` in the
 //! environment, the board sets up as usual, then runs only the first `N` ticks (control
 //! events and `tick_with_pump`, nothing else: no checks, no telemetry) and exits 0, so
 //! that a per-address instruction histogram of an `N`-tick run minus that of a 0-tick run

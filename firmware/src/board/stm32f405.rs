@@ -22,7 +22,7 @@
 //! `probe-rs run --chip STM32F405RGTx target/thumbv7em-none-eabihf/release/paragyro-firmware`
 //! (or `cargo run -p paragyro-firmware --target thumbv7em-none-eabihf --release
 //! --no-default-features --features stm32f405` with `PARAGYRO_RUNNER=probe-rs`, see
-//! docs/firmware.md).
+//! firmware/README.md).
 //!
 //! **Calibration.** [`CAL_X_UM_PER_VOLT`] and [`CAL_Y_UM_PER_VOLT`] are the analog
 //! front end's design scale (the values the replay table uses); a built board replaces

@@ -13,7 +13,7 @@
 //! paragyro-sim paper-001 [--out DIR]                  seed 001's stationary regimes, Figs 3–4
 //! paragyro-sim paper-claims                           the "20 %" claim, reading by reading
 //! paragyro-sim paper-raw [--out DIR]                  the paper's own estimator on the raw signals
-//! paragyro-sim record <scenario|file.toml>            a simulated record (docs/record-format.md)
+//! paragyro-sim record <scenario|file.toml>            a simulated record (host-sim/sim/record-format.md)
 //!              --out FILE.csv [--seed N]               and its truth, FILE.truth.json
 //! paragyro-sim replay FILE.csv --out DIR              the core open-loop on a record:
 //!              [--precision f32|f64]                   estimates.csv, summary.json
@@ -64,7 +64,7 @@ enum Command {
     /// Seed 000's "sense amplitude drops to 20 %" claim, reading by reading (full-rate plant).
     #[command(name = "paper-claims")]
     PaperClaims,
-    /// Simulate a scenario as a record (CSV at 500 Hz, docs/record-format.md); its truth
+    /// Simulate a scenario as a record (CSV at 500 Hz, host-sim/sim/record-format.md); its truth
     /// goes to FILE.truth.json beside it.
     Record(cmd::record::Args),
     /// List the effects the simulator can add (names, units, what they add).

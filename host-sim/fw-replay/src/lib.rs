@@ -1,4 +1,4 @@
-//! Host side of the firmware's replay (docs/firmware.md): the replay-table generator
+//! Host side of the firmware's replay (firmware/README.md): the replay-table generator
 //! ([`table`]) and the capture-log converter ([`capture`]). The binary
 //! `paragyro-fw-replay` is their command line; `tests/tests/firmware_qemu.rs` uses them
 //! as a library.

@@ -1,4 +1,4 @@
-//! `paragyro-fw-replay`: host side of the firmware's replay and capture (docs/firmware.md).
+//! `paragyro-fw-replay`: host side of the firmware's replay and capture (firmware/README.md).
 //!
 //! * `table`: simulate a scenario (closed loop with the f64 core, as `paragyro-sim record`)
 //!   and write the firmware's replay table (`firmware/replay/fw-drift-retune.bin` by
@@ -17,7 +17,7 @@ use paragyro_simulator::scenario::Scenario;
 #[derive(Parser)]
 #[command(
     version,
-    about = "Firmware replay tables and capture logs (docs/firmware.md)"
+    about = "Firmware replay tables and capture logs (firmware/README.md)"
 )]
 struct Cli {
     #[command(subcommand)]

@@ -1,5 +1,5 @@
 //! Writer of the firmware's replay table (`PGFWRPL1`; the format and its reader are
-//! `paragyro_firmware::table`, documented there and in docs/firmware.md).
+//! `paragyro_firmware::table`, documented there and in firmware/README.md).
 //!
 //! Every layout constant, slot index, control kind and the hash come from
 //! `paragyro_firmware::table`: one definition of the format, shared by writer and reader.

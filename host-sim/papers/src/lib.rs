@@ -1,4 +1,4 @@
-//! paragyro-papers: reproductions of the source papers (docs/paper-reproduction.md).
+//! paragyro-papers: reproductions of the source papers (host-sim/papers/README.md).
 //! Research code: it uses the simulator and the core; no product crate depends on it.
 //!
 //! * [`averaged`]: the averaged slow flow of seed 000's gyro (steady states, stability,

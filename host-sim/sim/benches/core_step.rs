@@ -2,7 +2,7 @@
 //! samples (the `identify` scenario, dithered, past the start-up gate: the full path
 //! with both RLS updates).
 //!
-//! `cargo bench -p paragyro-sim --bench core_step`
+//! `cargo bench -p paragyro-simulator --bench core_step`
 
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
 use paragyro_core::{Estimator, Real, Sample};

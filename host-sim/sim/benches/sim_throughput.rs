@@ -1,7 +1,7 @@
 //! Throughput of the full-rate simulated gyro (eq. 6, RK4 at 128 steps per carrier
 //! period, 14-channel lock-in, 1 pm/√Hz noise on both axes).
 //!
-//! Run: `cargo bench -p paragyro-sim --bench sim_throughput`. Besides criterion's timing
+//! Run: `cargo bench -p paragyro-simulator --bench sim_throughput`. Besides criterion's timing
 //! of "simulate 0.1 s (50 samples)" it prints the simulated seconds per wall-clock second
 //! of a plain timed run (target ≥ 10, ARCHITECTURE.md §5).
 

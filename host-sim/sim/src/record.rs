@@ -1,5 +1,5 @@
 //! The record: one CSV format at 500 Hz for real devices and simulations
-//! (`paragyro-record 1`, specified in `docs/record-format.md`).
+//! (`paragyro-record 1`, specified in `host-sim/sim/record-format.md`).
 //!
 //! ```text
 //! # format: paragyro-record 1

@@ -1,5 +1,5 @@
 //! `paragyro-sim diagnose FILE.csv --out DIR`: where a record departs from the simulator,
-//! which effect causes it, how far the gap shrinks once it is added (docs/diagnosis.md).
+//! which effect causes it, how far the gap shrinks once it is added (host-sim/diagnose/README.md).
 
 use std::path::PathBuf;
 
@@ -12,7 +12,7 @@ use paragyro_diagnose::diagnose::{Model, Options, diagnose, write_report};
 /// causes it, how far it shrinks once that effect is added (report.md, report.json, PNGs).
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The record (CSV, docs/record-format.md). Its truth file is never read.
+    /// The record (CSV, host-sim/sim/record-format.md). Its truth file is never read.
     pub record: PathBuf,
     /// Output directory (created if needed).
     #[arg(long, value_name = "DIR")]

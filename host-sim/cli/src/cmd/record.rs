@@ -1,4 +1,4 @@
-//! `paragyro-sim record <scenario> --out FILE.csv`: a simulated record (docs/record-format.md)
+//! `paragyro-sim record <scenario> --out FILE.csv`: a simulated record (host-sim/sim/record-format.md)
 //! and its truth beside it, optionally with sim-to-real effects, a temperature ramp and a
 //! rate table.
 
@@ -10,7 +10,7 @@ use super::{Ctx, EXIT_RUN, Failure, fail, load};
 use paragyro_simulator::effects::EffectSpec;
 use paragyro_simulator::record::{RecordOptions, write_simulated_record};
 
-/// Simulate a scenario as a record (CSV at 500 Hz, docs/record-format.md); its truth
+/// Simulate a scenario as a record (CSV at 500 Hz, host-sim/sim/record-format.md); its truth
 /// goes to FILE.truth.json beside it.
 #[derive(clap::Args, Debug)]
 pub struct Args {

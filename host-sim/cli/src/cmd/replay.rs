@@ -9,7 +9,7 @@ use paragyro_simulator::record::write_replay;
 /// Run the core open-loop on a record; write estimates.csv and summary.json.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The record (CSV, docs/record-format.md).
+    /// The record (CSV, host-sim/sim/record-format.md).
     pub record: PathBuf,
     /// Output directory (created if needed).
     #[arg(long, value_name = "DIR")]

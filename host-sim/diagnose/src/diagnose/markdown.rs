@@ -31,7 +31,7 @@ pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
     which(&mut s, r);
     place(&mut s, r);
     s.push_str(&format!(
-        "\n## Method\n\nThe record's rows about the model (the core's estimator, never re-linearised, rows weighted to unit noise) minus the rows of the simulator re-run on the record's inputs; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the best held-out energy of any model: each effect, the catch-all (14 θ free plus the quadratic and cubic force monomials), and both together. Thresholds: size/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap, at most {:.0} % of the gap above the noise left unexplained. See docs/diagnosis.md.\n",
+        "\n## Method\n\nThe record's rows about the model (the core's estimator, never re-linearised, rows weighted to unit noise) minus the rows of the simulator re-run on the record's inputs; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the best held-out energy of any model: each effect, the catch-all (14 θ free plus the quadratic and cubic force monomials), and both together. Thresholds: size/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap, at most {:.0} % of the gap above the noise left unexplained. See host-sim/diagnose/README.md.\n",
         r.spans_s.fit[0],
         r.spans_s.fit[1],
         r.spans_s.held_out[0],

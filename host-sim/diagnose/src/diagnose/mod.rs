@@ -1,6 +1,6 @@
 //! The sim-to-real diagnosis (`paragyro-sim diagnose`): where the gap between a record
 //! and the simulator lies, which effect of [`paragyro_simulator::effects`] causes it, and how far it
-//! shrinks once that effect is added (docs/diagnosis.md).
+//! shrinks once that effect is added (host-sim/diagnose/README.md).
 //!
 //! # Method
 //!

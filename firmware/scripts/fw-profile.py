@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Per-tick instruction split from two insnprof histograms (see scripts/fw-profile.sh).
+"""Per-tick instruction split from two insnprof histograms (see firmware/scripts/fw-profile.sh).
 
 Usage: fw-profile.py N DIR   (DIR holds nm-0.txt, nm-N.txt, prof-0.txt, prof-N.txt)
 Instructions are attributed to the function whose code they are (self counts: an inlined

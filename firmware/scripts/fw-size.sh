@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Flash and static RAM of a firmware ELF (docs/firmware.md, "Cost"):
+# Flash and static RAM of a firmware ELF (firmware/README.md, "Cost"):
 # flash = .vector_table + .text + .rodata + .data (its load image), static RAM = .data + .bss
 # + .uninit (the stack comes on top: the qemu board prints its measured high-water mark).
 set -euo pipefail

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Exact instruction split of single ticks of the QEMU replay (docs/firmware.md, "Cost"):
+# Exact instruction split of single ticks of the QEMU replay (firmware/README.md, "Cost"):
 # for each tick K, profile runs of K and K + 1 ticks (PARAGYRO_PROFILE_TICKS) under the
 # histogram plugin; their difference is tick K alone (0-based), split as fw-profile.sh does.
-# Usage: scripts/fw-profile-tick.sh K [K ...]
+# Usage: firmware/scripts/fw-profile-tick.sh K [K ...]
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 OUT="${FW_PROFILE_DIR:-target/fw-profile}"
 NM="${LLVM_NM:-llvm-nm-14}"
 mkdir -p "$OUT"
@@ -30,5 +30,5 @@ for k in "$@"; do
   cp "$OUT/nm-t$k.txt" "$d/nm-0.txt"; cp "$OUT/prof-t$k.txt" "$d/prof-0.txt"
   cp "$OUT/nm-t$((k + 1)).txt" "$d/nm-1.txt"; cp "$OUT/prof-t$((k + 1)).txt" "$d/prof-1.txt"
   echo "== tick $k"
-  python3 scripts/fw-profile.py 1 "$d"
+  python3 firmware/scripts/fw-profile.py 1 "$d"
 done
