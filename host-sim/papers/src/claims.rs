@@ -161,7 +161,7 @@ pub fn readings() -> Vec<Reading> {
         w,
         1.03,
         ay,
-        Some(3000.0 / paragyro_simulator::plant::OMEGA0_RAD_S),
+        Some(3000.0 / paragyro_core::physics::OMEGA0_TABLE2_RAD_S),
     );
     out
 }

@@ -50,10 +50,6 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
 
-/// The core's [`OMEGA0_TABLE2_RAD_S`] under its former simulator name (kept for the
-/// papers crate; new code uses the core's name).
-pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S as OMEGA0_RAD_S;
-
 /// Table 2 Coriolis coefficient γ (150 °/s), the core's `TABLE2.gamma`.
 pub const GAMMA_TABLE2: f64 = paragyro_core::physics::TABLE2.gamma;
 

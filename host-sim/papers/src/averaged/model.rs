@@ -4,7 +4,8 @@
 use std::f64::consts::{PI, TAU};
 
 use paragyro_core::Cplx;
-use paragyro_simulator::plant::{ACCEL_TABLE2, OMEGA0_RAD_S, Theta};
+use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
+use paragyro_simulator::plant::{ACCEL_TABLE2, Theta};
 use serde::Serialize;
 
 use crate::complex::CplxExt;
@@ -132,7 +133,7 @@ pub struct SweepPoint {
 
 /// Pump frequency in kHz for the half-frequency `omega` (units of ω0 = 67 858 rad/s).
 pub fn pump_khz(omega: f64) -> f64 {
-    2.0 * omega * OMEGA0_RAD_S / TAU / 1e3
+    2.0 * omega * OMEGA0_TABLE2_RAD_S / TAU / 1e3
 }
 
 /// Canonical representative of `±v`: `Re A ≥ 0` (then `Im A ≥ 0` if `Re A = 0`).

@@ -7,7 +7,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use paragyro_core::Cplx;
-use paragyro_simulator::plant::{GyroSim, OMEGA0_RAD_S, PlantInputs, SimConfig};
+use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
+use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig};
 use serde::{Serialize, Serializer};
 
 use super::model::{AveragedModel, SEED_A, StateRecord, SteadyState, SweepPoint, pump_khz};
@@ -455,7 +456,7 @@ pub fn write_averaged_report(dir: &Path) -> Result<AveragedReport> {
         model: "averaged slow flow of seed 000 eq. (6), DERIVATION.md §6 (first-order Krylov–Bogolyubov / harmonic balance, DC + fundamental)".into(),
         parameters: Parameters {
             theta: "Table 2 (plant::Theta::table2), s = 1, ax = ay = 0.0213 (10 g)".into(),
-            omega0_rad_s: OMEGA0_RAD_S,
+            omega0_rad_s: OMEGA0_TABLE2_RAD_S,
             pump_frequency: "2·ω·ω0/(2π)".into(),
         },
         band: Band {

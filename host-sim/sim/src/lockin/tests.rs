@@ -7,11 +7,11 @@ use paragyro_core::Cplx;
 fn tup(z: Cplx<f64>) -> (f64, f64) {
     (z.re, z.im)
 }
-use paragyro_core::physics::OMEGA0_TABLE2_RAD_S as OMEGA0_RAD_S;
+use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
 use std::f64::consts::PI;
 
 fn hz_to_rad_tau(f: f64) -> f64 {
-    2.0 * PI * f / OMEGA0_RAD_S
+    2.0 * PI * f / OMEGA0_TABLE2_RAD_S
 }
 
 fn cabs(z: (f64, f64)) -> f64 {
