@@ -9,6 +9,7 @@
 use std::collections::BTreeMap;
 
 use paragyro_core::Counters;
+use paragyro_core::physics::{PHYSICAL_NAMES, Physical};
 use serde::Serialize;
 use serde::ser::{SerializeMap, Serializer};
 
@@ -94,74 +95,45 @@ pub fn theta_named<S: Serializer, V: Serialize>(p: &ThetaPair<V>, s: S) -> Resul
     m.end()
 }
 
-/// The 12 physical parameters of the corrected Table 3 by name (non-dimensional; the
-/// order of [`crate::trace::PHYS_NAMES`] and of the core's `Physical::as_array`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-#[allow(missing_docs)]
-pub struct PhysicalValues {
-    pub mu_x: f64,
-    pub mu_y: f64,
-    pub mu_xy: f64,
-    pub wx2: f64,
-    pub wy2: f64,
-    pub wxy2: f64,
-    pub alpha_x: f64,
-    pub alpha_y: f64,
-    pub beta1: f64,
-    pub beta3: f64,
-    pub gamma: f64,
-    pub gamma_p: f64,
-}
+/// The 12 physical parameters of the corrected Table 3, serialised by name (the core's
+/// [`PHYSICAL_NAMES`]: `{"mu_x": .., …, "gamma_p": ..}`). A view of the core's
+/// [`Physical`] (read its fields through `Deref`); the accelerometer gains `c_ax`, `c_ay`
+/// are not part of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhysicalValues(pub Physical);
 
 impl PhysicalValues {
     /// From the array in `PHYS_NAMES` order.
     pub fn from_array(a: [f64; 12]) -> Self {
-        let [
-            mu_x,
-            mu_y,
-            mu_xy,
-            wx2,
-            wy2,
-            wxy2,
-            alpha_x,
-            alpha_y,
-            beta1,
-            beta3,
-            gamma,
-            gamma_p,
-        ] = a;
-        PhysicalValues {
-            mu_x,
-            mu_y,
-            mu_xy,
-            wx2,
-            wy2,
-            wxy2,
-            alpha_x,
-            alpha_y,
-            beta1,
-            beta3,
-            gamma,
-            gamma_p,
-        }
+        Self(Physical::from_array(a))
     }
 
     /// The array in `PHYS_NAMES` order.
     pub fn as_array(&self) -> [f64; 12] {
-        [
-            self.mu_x,
-            self.mu_y,
-            self.mu_xy,
-            self.wx2,
-            self.wy2,
-            self.wxy2,
-            self.alpha_x,
-            self.alpha_y,
-            self.beta1,
-            self.beta3,
-            self.gamma,
-            self.gamma_p,
-        ]
+        self.0.as_array()
+    }
+}
+
+impl Default for PhysicalValues {
+    fn default() -> Self {
+        Self::from_array([0.0; 12])
+    }
+}
+
+impl std::ops::Deref for PhysicalValues {
+    type Target = Physical;
+    fn deref(&self) -> &Physical {
+        &self.0
+    }
+}
+
+impl Serialize for PhysicalValues {
+    fn serialize<S: Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        let mut m = ser.serialize_map(Some(PHYSICAL_NAMES.len()))?;
+        for (name, v) in PHYSICAL_NAMES.iter().zip(self.as_array()) {
+            m.serialize_entry(name, &v)?;
+        }
+        m.end()
     }
 }
 
