@@ -24,14 +24,24 @@ fn main() {
     );
 }
 
-#[cfg(all(target_os = "none", feature = "qemu", feature = "stm32f405"))]
+#[cfg(all(
+    target_os = "none",
+    any(
+        all(feature = "qemu", feature = "stm32f405"),
+        all(feature = "qemu", feature = "fil"),
+        all(feature = "fil", feature = "stm32f405")
+    )
+))]
 compile_error!(
-    "choose one board: `--features qemu` (the default) or `--no-default-features --features stm32f405`"
+    "choose one board: `--features qemu` (the default), `--no-default-features --features fil` or `--no-default-features --features stm32f405`"
 );
 
-#[cfg(all(target_os = "none", not(any(feature = "qemu", feature = "stm32f405"))))]
+#[cfg(all(
+    target_os = "none",
+    not(any(feature = "qemu", feature = "stm32f405", feature = "fil"))
+))]
 compile_error!(
-    "no board: build with `--features qemu` (the default) or `--no-default-features --features stm32f405`"
+    "no board: build with `--features qemu` (the default), `--no-default-features --features fil` or `--no-default-features --features stm32f405`"
 );
 
 #[cfg(target_os = "none")]

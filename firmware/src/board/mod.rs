@@ -1,5 +1,7 @@
 //! The boards (one per feature) and what they share: the telemetry and capture lines.
 
+#[cfg(feature = "fil")]
+pub mod fil;
 #[cfg(feature = "qemu")]
 pub mod qemu;
 #[cfg(feature = "stm32f405")]
@@ -11,10 +13,12 @@ use paragyro_core::Config;
 use paragyro_firmware::app::{App, TickReport};
 
 /// Telemetry every this many ticks (10 Hz at 500 Hz).
+#[cfg_attr(feature = "fil", allow(dead_code))]
 pub const TELEMETRY_EVERY: u32 = 50;
 
 /// The 10 Hz telemetry line: time, health bits, ω̂y², rate, pump in effect and commanded,
 /// and the firmware's fault counters when any is non-zero.
+#[cfg_attr(feature = "fil", allow(dead_code))]
 pub fn telemetry<AX, AY, XL, DDS>(k: u32, fs_hz: f64, app: &App<AX, AY, XL, DDS>, r: &TickReport)
 where
     AX: SpiDevice,

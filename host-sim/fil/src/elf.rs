@@ -1,0 +1,79 @@
+//! The addresses of the `fil` board's markers, from the ELF's symbol table (ELF32,
+//! little-endian: what the thumbv7em target links).
+
+use anyhow::{Context, bail, ensure};
+
+fn u16_at(b: &[u8], o: usize) -> anyhow::Result<u16> {
+    let s = b.get(o..o + 2).context("truncated ELF")?;
+    Ok(u16::from_le_bytes([s[0], s[1]]))
+}
+
+fn u32_at(b: &[u8], o: usize) -> anyhow::Result<u32> {
+    let s = b.get(o..o + 4).context("truncated ELF")?;
+    Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+}
+
+/// Every function symbol `(name, address with the Thumb bit cleared)`.
+pub fn function_symbols(elf: &[u8]) -> anyhow::Result<Vec<(String, u32)>> {
+    ensure!(
+        elf.get(..6) == Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]),
+        "not a little-endian ELF32 file"
+    );
+    let shoff = u32_at(elf, 0x20)? as usize;
+    let shentsize = u16_at(elf, 0x2E)? as usize;
+    let shnum = u16_at(elf, 0x30)? as usize;
+    let section = |i: usize| -> anyhow::Result<(u32, usize, usize, usize)> {
+        let o = shoff + i * shentsize;
+        Ok((
+            u32_at(elf, o + 4)?,
+            u32_at(elf, o + 16)? as usize,
+            u32_at(elf, o + 20)? as usize,
+            u32_at(elf, o + 24)? as usize,
+        ))
+    };
+    let mut out = Vec::new();
+    for i in 0..shnum {
+        let (ty, off, size, link) = section(i)?;
+        if ty != 2 {
+            continue; // SHT_SYMTAB
+        }
+        let (_, stroff, strsize, _) = section(link)?;
+        let strtab = elf.get(stroff..stroff + strsize).context("string table")?;
+        for s in (off..off + size).step_by(16) {
+            let name = u32_at(elf, s)? as usize;
+            let value = u32_at(elf, s + 4)?;
+            let info = *elf.get(s + 12).context("symbol")?;
+            if info & 0xF != 2 {
+                continue; // STT_FUNC
+            }
+            let rest = strtab.get(name..).context("symbol name")?;
+            let end = rest.iter().position(|&c| c == 0).unwrap_or(rest.len());
+            out.push((
+                String::from_utf8_lossy(&rest[..end]).into_owned(),
+                value & !1,
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// The address of the one function whose (mangled) name contains `needle`.
+pub fn address_of(symbols: &[(String, u32)], needle: &str) -> anyhow::Result<u32> {
+    let hits: Vec<_> = symbols.iter().filter(|(n, _)| n.contains(needle)).collect();
+    match hits.as_slice() {
+        [(_, a)] => Ok(*a),
+        [] => bail!("no function `{needle}` in the firmware image (not a `fil` build?)"),
+        _ => bail!("several functions match `{needle}`"),
+    }
+}
+
+/// The plugin's marker addresses: tick_begin, tick_end, fake_enter, fake_exit.
+pub fn markers(elf: &[u8]) -> anyhow::Result<[u32; 4]> {
+    let syms = function_symbols(elf)?;
+    Ok([
+        address_of(&syms, "3fil10tick_begin")?,
+        address_of(&syms, "3fil8tick_end")?,
+        address_of(&syms, "3fil10fake_enter")?,
+        address_of(&syms, "3fil9fake_exit")?,
+    ])
+}

@@ -1,0 +1,102 @@
+//! `paragyro-fil`: the firmware in the loop (firmware/README.md, "Firmware in the loop").
+//!
+//! QEMU runs the firmware's `fil` board (the unchanged drivers, `App::tick` and the board
+//! loop; firmware/src/board/fil.rs) and this process plays the chips every tick from the
+//! full-rate plant of `paragyro-simulator`: the two ADS131M08 frames (STATUS, codes, CRC)
+//! and the ADXL355 burst go to the firmware, the bytes the firmware writes to the AD9959
+//! come back and drive the plant's pump from the IO_UPDATE on. One exchange per tick over
+//! two named pipes and semihosting (TOOLCHAIN.md §3.1). The plant's noise is seeded: a
+//! session is reproducible.
+//!
+//! * [`session`]: the exchange and the plant;
+//! * [`chips`]: the chips' bytes, and the faults a scenario injects;
+//! * [`verdict`]: the acceptance checks, `summary.json`, the host-only closed loop;
+//! * [`build`]: the `fil` image and the instruction-count plugin;
+//! * [`elf`]: the plugin's marker addresses from the image.
+
+pub mod build;
+pub mod chips;
+pub mod elf;
+pub mod session;
+pub mod verdict;
+
+use std::path::{Path, PathBuf};
+
+use paragyro_core::config::PumpProfile;
+use paragyro_simulator::scenario::Scenario;
+
+pub use chips::Faults;
+pub use verdict::{Expect, Summary};
+
+/// A loop scenario: a simulator scenario, its faults and what the verdict expects.
+#[derive(Clone, Debug)]
+pub struct LoopScenario {
+    /// Name (also the directory of its output under `target/fil/`).
+    pub name: String,
+    /// The simulator scenario.
+    pub scenario: Scenario,
+    /// Faults injected by the host's chips.
+    pub faults: Faults,
+    /// Expected outcome.
+    pub expect: Expect,
+}
+
+/// The scenario of `cargo fw-loop`: `drift-retune` with the accelerations at 4 g (within
+/// the ADXL355's ±8 g), host-sim/scenarios/fw-drift-retune.toml.
+pub fn drift_retune() -> anyhow::Result<LoopScenario> {
+    let path = build::workspace_root().join("host-sim/scenarios/fw-drift-retune.toml");
+    let scenario = Scenario::from_file(&path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(LoopScenario {
+        name: "drift-retune".into(),
+        scenario,
+        faults: Faults::default(),
+        expect: Expect {
+            retune: true,
+            max_bad_ticks: 0,
+        },
+    })
+}
+
+/// Runs `ls` with the image `elf` and the plugin, writes `out/summary.json` and returns the
+/// summary (whose `pass` is the verdict).
+pub fn run(
+    ls: &LoopScenario,
+    elf: &Path,
+    plugin: &Path,
+    out: &Path,
+    seed: Option<u64>,
+    profile: PumpProfile,
+) -> anyhow::Result<Summary> {
+    let seed = seed.unwrap_or(ls.scenario.seed);
+    let opts = session::Options {
+        scenario: ls.scenario.clone(),
+        seed: Some(seed),
+        faults: ls.faults,
+        core_profile: profile,
+        elf: elf.to_path_buf(),
+        plugin: plugin.to_path_buf(),
+        work_dir: out.to_path_buf(),
+    };
+    let (fil, host) = std::thread::scope(|s| {
+        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, profile));
+        let fil = session::run(&opts);
+        (fil, host.join())
+    });
+    let fil = fil?;
+    let host = host.map_err(|_| anyhow::anyhow!("the host-only loop's thread panicked"))??;
+    let summary = verdict::summarize(&ls.scenario, seed, profile, &fil, host, ls.expect);
+    std::fs::create_dir_all(out)?;
+    std::fs::write(
+        out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)? + "\n",
+    )?;
+    Ok(summary)
+}
+
+/// `target/fil` under the workspace (or `$CARGO_TARGET_DIR/fil`).
+pub fn default_out() -> PathBuf {
+    std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| build::workspace_root().join("target"))
+        .join("fil")
+}

@@ -1,0 +1,471 @@
+//! One firmware-in-the-loop session: QEMU running the `fil` board, the host playing the
+//! chips from the full-rate plant, one exchange per 500 Hz tick.
+
+use std::fs::{self, File, OpenOptions};
+use std::io::{ErrorKind, Read, Write};
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail, ensure};
+use paragyro_core::config::PumpProfile;
+use paragyro_firmware::drivers::adxl355::Range;
+use paragyro_firmware::fil::{
+    FROM_FW_BYTES, FromFw, Init, MAX_TICK_CONTROLS, TICK_END, TICK_SETUP, ToFw, flag,
+};
+use paragyro_firmware::run::{AMPLITUDE, GUARD_HALF_WIDTH_HZ};
+use paragyro_firmware::table::{config_slots, control};
+use paragyro_simulator::lockin::LockinExt;
+use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
+use paragyro_simulator::runner;
+use paragyro_simulator::scenario::{EventKind, L0_M, Scenario};
+
+use crate::chips::{Dds, Faults, SensorChips};
+
+/// µm per volt of the drive and sense lock-in channels at the ADC (PGA gain 1): the
+/// design scale of the replay table and of the stm32f405 board.
+pub const UM_PER_VOLT: [f32; 2] = [8.0, 4.0];
+/// ADXL355 range bits: ±8 g.
+pub const ACCEL_RANGE_BITS: u32 = 3;
+/// How long the host waits for one answer of the firmware.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(60);
+/// O_NONBLOCK on Linux.
+const O_NONBLOCK: i32 = 0o4000;
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// The scenario (name or path).
+    pub scenario: Scenario,
+    /// Overrides the scenario's seed.
+    pub seed: Option<u64>,
+    /// Faults to inject.
+    pub faults: Faults,
+    /// The pump profile the core is configured with (what the board's DDS does: it steps
+    /// at IO_UPDATE, `Staircase`).
+    pub core_profile: PumpProfile,
+    /// The firmware image (a `fil` build).
+    pub elf: PathBuf,
+    /// The instruction-count plugin (`libtickcount.so`).
+    pub plugin: PathBuf,
+    /// Working directory of the session (pipes, logs).
+    pub work_dir: PathBuf,
+}
+
+/// One tick as the host saw it.
+#[derive(Clone, Copy, Debug)]
+pub struct TickRow {
+    /// Time, s.
+    pub t_s: f64,
+    /// True ωy².
+    pub wy2_true: f64,
+    /// The plant's sense amplitude |Y1|, µm.
+    pub sense_amp_um: f64,
+    /// The pump the DDS ran over the interval after this tick, Hz.
+    pub dds_pump_hz: f64,
+    /// The firmware's answer.
+    pub fw: FromFw,
+}
+
+/// The raw outcome of a session.
+pub struct Session {
+    /// Every tick.
+    pub rows: Vec<TickRow>,
+    /// The answer to the end message (final counters).
+    pub end: FromFw,
+    /// Exact instructions per tick without the fake chips (the plugin), one per tick.
+    pub instructions: Vec<u64>,
+    /// IO_UPDATE pulses the AD9959 model saw.
+    pub pulses: u64,
+    /// Register writes the AD9959 model applied.
+    pub dds_writes: u64,
+    /// Ticks after which the DDS's three channels were not phase-locked (2k, k, 3k).
+    pub unlocked_ticks: u64,
+    /// The firmware's exit code.
+    pub exit_code: Option<i32>,
+}
+
+/// The control events of the interval `(t, t_next]` as the firmware's control kinds.
+fn controls_for(
+    sc: &Scenario,
+    events: &[paragyro_simulator::scenario::EventSpec],
+    next: &mut usize,
+    t_next: f64,
+) -> anyhow::Result<Vec<(u32, f64)>> {
+    let mut out = Vec::new();
+    while *next < events.len() && events[*next].t_s <= t_next + 1e-12 {
+        let e = events[*next];
+        match e.kind {
+            EventKind::PumpJump { .. } => {
+                if let Some(c) = sc.pump_jump_centre_hz(&e) {
+                    out.push((control::PUMP_JUMP_HZ, c));
+                }
+            }
+            EventKind::Dither { enabled, pump_hz } => {
+                if let Some(a) = pump_hz {
+                    out.push((control::DITHER_PUMP_HZ, a));
+                }
+                out.push((control::DITHER, if enabled { 1.0 } else { 0.0 }));
+            }
+            EventKind::Retune { enabled } => {
+                out.push((control::RETUNE, if enabled { 1.0 } else { 0.0 }))
+            }
+            _ => {}
+        }
+        *next += 1;
+    }
+    ensure!(
+        out.len() <= MAX_TICK_CONTROLS,
+        "more than {MAX_TICK_CONTROLS} control events in one tick at {t_next} s"
+    );
+    Ok(out)
+}
+
+/// The QEMU process and the pipes to it; killed on drop if still running.
+struct Qemu {
+    child: Child,
+    to_fw: File,
+    from_fw: mpsc::Receiver<std::io::Result<Vec<u8>>>,
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+impl Qemu {
+    fn send(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let mut done = 0;
+        let t0 = Instant::now();
+        while done < bytes.len() {
+            match self.to_fw.write(&bytes[done..]) {
+                Ok(n) => done += n,
+                Err(e)
+                    if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
+                {
+                    self.alive()?;
+                    ensure!(
+                        t0.elapsed() < ANSWER_TIMEOUT,
+                        "the firmware does not read its pipe"
+                    );
+                    std::thread::sleep(Duration::from_micros(50));
+                }
+                Err(e) => return Err(e).context("writing to the firmware"),
+            }
+        }
+        Ok(())
+    }
+
+    fn alive(&mut self) -> anyhow::Result<()> {
+        if let Some(st) = self.child.try_wait()? {
+            bail!("QEMU exited early ({st}); see qemu.log and defmt.log in the work directory");
+        }
+        Ok(())
+    }
+
+    fn recv(&mut self) -> anyhow::Result<FromFw> {
+        let t0 = Instant::now();
+        loop {
+            match self.from_fw.recv_timeout(Duration::from_millis(200)) {
+                Ok(Ok(b)) => {
+                    let arr: [u8; FROM_FW_BYTES] =
+                        b.try_into().map_err(|_| anyhow::anyhow!("short answer"))?;
+                    return Ok(FromFw::decode(&arr));
+                }
+                Ok(Err(e)) => return Err(e).context("reading the firmware's answer"),
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    self.alive()?;
+                    ensure!(
+                        t0.elapsed() < ANSWER_TIMEOUT,
+                        "no answer from the firmware in {ANSWER_TIMEOUT:?}"
+                    );
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    self.alive()?;
+                    bail!("the firmware closed its pipe");
+                }
+            }
+        }
+    }
+}
+
+fn mkfifo(p: &Path) -> anyhow::Result<()> {
+    let st = Command::new("mkfifo")
+        .arg(p)
+        .status()
+        .context("running mkfifo")?;
+    ensure!(st.success(), "mkfifo {} failed", p.display());
+    Ok(())
+}
+
+fn start_qemu(opts: &Options, markers: [u32; 4]) -> anyhow::Result<Qemu> {
+    let dir = &fs::canonicalize(&opts.work_dir)?;
+    let elf = fs::canonicalize(&opts.elf)?;
+    let plugin_so = fs::canonicalize(&opts.plugin)?;
+    let run = dir.join("run");
+    if run.exists() {
+        fs::remove_dir_all(&run).with_context(|| format!("removing {}", run.display()))?;
+    }
+    fs::create_dir_all(&run)?;
+    let to_path = run.join("fil_to_fw");
+    let from_path = run.join("fil_from_fw");
+    mkfifo(&to_path)?;
+    mkfifo(&from_path)?;
+    let [b, e, fi, fo] = markers;
+    let plugin = format!(
+        "{},begin={b:x},end={e:x},fin={fi:x},fout={fo:x},out={}",
+        plugin_so.display(),
+        dir.join("tickcount.txt").display()
+    );
+    let child = Command::new("qemu-system-arm")
+        .current_dir(&run)
+        .args([
+            "-cpu",
+            "cortex-m4",
+            "-machine",
+            "netduinoplus2",
+            "-nographic",
+        ])
+        .args(["-monitor", "none", "-serial", "none", "-icount", "shift=0"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-plugin", &plugin, "-d", "plugin", "-D"])
+        .arg(dir.join("plugin.log"))
+        .arg("-kernel")
+        .arg(&elf)
+        .stdin(Stdio::null())
+        .stdout(File::create(dir.join("defmt.bin"))?)
+        .stderr(File::create(dir.join("qemu.log"))?)
+        .spawn()
+        .context("starting qemu-system-arm (install it: `cargo xtask setup`)")?;
+    // same order as the firmware: fil_to_fw first (it reads), then fil_from_fw
+    let t0 = Instant::now();
+    let mut child = child;
+    let to_fw = loop {
+        match OpenOptions::new()
+            .write(true)
+            .custom_flags(O_NONBLOCK)
+            .open(&to_path)
+        {
+            Ok(f) => break f,
+            Err(e) if e.raw_os_error() == Some(6) => {
+                // ENXIO: the firmware has not opened its end yet
+                if let Some(st) = child.try_wait()? {
+                    bail!(
+                        "QEMU exited before opening the pipes ({st}); see {}",
+                        dir.join("qemu.log").display()
+                    );
+                }
+                if t0.elapsed() > ANSWER_TIMEOUT {
+                    let _ = child.kill();
+                    bail!("the firmware did not open fil_to_fw");
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(e) => return Err(e).context("opening fil_to_fw"),
+        }
+    };
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut f = match File::open(&from_path) {
+            Ok(f) => f,
+            Err(e) => {
+                let _ = tx.send(Err(e));
+                return;
+            }
+        };
+        loop {
+            let mut b = vec![0u8; FROM_FW_BYTES];
+            match f.read_exact(&mut b) {
+                Ok(()) => {
+                    if tx.send(Ok(b)).is_err() {
+                        return;
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::UnexpectedEof => return,
+                Err(e) => {
+                    let _ = tx.send(Err(e));
+                    return;
+                }
+            }
+        }
+    });
+    Ok(Qemu {
+        child,
+        to_fw,
+        from_fw: rx,
+    })
+}
+
+/// The core configuration the firmware gets for `sc` with the pump profile `profile`.
+pub fn core_config(sc: &Scenario, profile: PumpProfile) -> paragyro_core::Config {
+    let mut cfg = runner::core_config(sc);
+    cfg.pump_profile = profile;
+    cfg
+}
+
+/// Runs the session.
+pub fn run(opts: &Options) -> anyhow::Result<Session> {
+    let sc = &opts.scenario;
+    let cfg = core_config(sc, opts.core_profile);
+    cfg.validated()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let elf = fs::read(&opts.elf).with_context(|| format!("reading {}", opts.elf.display()))?;
+    let markers = crate::elf::markers(&elf)?;
+    fs::create_dir_all(&opts.work_dir)?;
+    let init = Init {
+        cfg_slots: config_slots(&cfg),
+        um_per_volt: UM_PER_VOLT,
+        accel_range_bits: ACCEL_RANGE_BITS,
+        guard_half_width_hz: GUARD_HALF_WIDTH_HZ,
+        amplitude: [AMPLITUDE.base_scale, AMPLITUDE.full_scale],
+    };
+    let mut q = start_qemu(opts, markers)?;
+    q.send(&init.encode())?;
+    let setup = q.recv()?;
+    ensure!(
+        setup.tick == TICK_SETUP,
+        "unexpected set-up answer (tick {})",
+        setup.tick
+    );
+    let mut dds = Dds::new();
+    let mut pulses = u64::from(dds.apply(&setup)?);
+    ensure!(
+        pulses > 0,
+        "the firmware did not start the pump (no IO_UPDATE at set-up)"
+    );
+
+    let seed = opts.seed.unwrap_or(sc.seed);
+    let f0 = sc.sim.f0_hz;
+    let w0 = sc.omega0_rad_s();
+    let fs = cfg.fs_hz;
+    let simcfg = SimConfig {
+        omega0_rad_s: w0,
+        fs_hz: fs,
+        steps_per_period: sc.sim.steps_per_period,
+        omega_max: (cfg.pump_centre_hz + GUARD_HALF_WIDTH_HZ) / (2.0 * f0) * 1.01,
+        lpf_order: sc.sim.lockin_lpf_order,
+        lpf_hz: sc.sim.lockin_lpf_hz,
+        noise_density: sc.sim.noise_pm_rthz * 1e-6,
+        seed,
+    };
+    let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
+    let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let n = (sc.duration_s * fs).round() as u64;
+    let accel_si = L0_M * w0 * w0;
+    let events = sc.control_events();
+    let mut next_ev = 0usize;
+    let mut chips = SensorChips::new(UM_PER_VOLT, Range::G8, opts.faults);
+    let mut rows = Vec::with_capacity(n as usize + 1);
+    let mut unlocked = 0u64;
+    for k in 0..=n {
+        let ku = k as usize;
+        let t = k as f64 / fs;
+        let t_next = (k + 1) as f64 / fs;
+        let ctl = controls_for(sc, &events, &mut next_ev, t_next)?;
+        let pa = sc.plant_at(t);
+        let li = sim.lockin();
+        let mut controls = [(0u32, 0.0f64); MAX_TICK_CONTROLS];
+        controls[..ctl.len()].copy_from_slice(&ctl);
+        let mut flags = 0;
+        if !chips.drdy(ku) {
+            flags |= flag::NO_DRDY;
+        }
+        if chips.dds_fails(ku) {
+            flags |= flag::DDS_FAIL;
+        }
+        let msg = ToFw {
+            tick: k as u32,
+            flags,
+            controls,
+            n_controls: ctl.len() as u8,
+            adc: chips.adc_frames(ku, &li.to_channels()),
+            accel: chips.accel_burst(ku, pa.accel_x * accel_si, pa.accel_y * accel_si),
+        };
+        q.send(&msg.encode())?;
+        let fw = q.recv()?;
+        ensure!(
+            fw.tick == k as u32,
+            "answer for tick {} at tick {k}",
+            fw.tick
+        );
+        pulses += u64::from(dds.apply(&fw)?);
+        if !dds.phase_locked() {
+            unlocked += 1;
+        }
+        rows.push(TickRow {
+            t_s: t,
+            wy2_true: pa.phys[4],
+            sense_amp_um: li.y_abs(1),
+            dds_pump_hz: dds.pump_hz(),
+            fw,
+        });
+        if k == n {
+            break;
+        }
+        // the DDS steps at IO_UPDATE and holds: the plant sees the new word over the
+        // whole interval (a staircase; the pulse's delay after DRDY is not modelled)
+        let pa1 = sc.plant_at(t_next);
+        let theta = Theta {
+            drive: pa.theta_drive,
+            sense: pa.theta_sense,
+        };
+        let omega = dds.pump_hz() / (2.0 * f0);
+        let s = dds.pump_word_scale() * f64::from(AMPLITUDE.full_scale) * sc.pump_scale_at(t_next);
+        let u0 = PlantInputs {
+            omega,
+            s,
+            ax: pa.accel_x,
+            ay: pa.accel_y,
+        };
+        let u1 = PlantInputs {
+            ax: pa1.accel_x,
+            ay: pa1.accel_y,
+            ..u0
+        };
+        sim.advance(&theta, &u0, &u1);
+    }
+    let end_msg = ToFw {
+        tick: u32::MAX,
+        flags: flag::END,
+        controls: [(0, 0.0); MAX_TICK_CONTROLS],
+        n_controls: 0,
+        adc: [[0; paragyro_firmware::drivers::ads131m08::FRAME_BYTES]; 2],
+        accel: [0; paragyro_firmware::fil::ACCEL_BURST],
+    };
+    q.send(&end_msg.encode())?;
+    let end = q.recv()?;
+    ensure!(end.tick == TICK_END, "unexpected end answer");
+    let t0 = Instant::now();
+    let exit_code = loop {
+        if let Some(st) = q.child.try_wait()? {
+            break st.code();
+        }
+        ensure!(
+            t0.elapsed() < ANSWER_TIMEOUT,
+            "QEMU did not exit after the end message"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let counts = fs::read_to_string(opts.work_dir.join("tickcount.txt"))
+        .context("the instruction-count plugin wrote no tickcount.txt")?;
+    let instructions = counts
+        .lines()
+        .map(|l| l.trim().parse::<u64>())
+        .collect::<Result<Vec<_>, _>>()
+        .context("tickcount.txt")?;
+    Ok(Session {
+        rows,
+        end,
+        instructions,
+        pulses,
+        dds_writes: dds.writes,
+        unlocked_ticks: unlocked,
+        exit_code,
+    })
+}

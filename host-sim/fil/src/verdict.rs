@@ -1,0 +1,352 @@
+//! The verdict of a session (`target/fil/summary.json`) and the host-only closed loop of
+//! the same scenario it is compared with.
+
+use paragyro_core::Estimator;
+use paragyro_core::config::PumpProfile;
+use paragyro_simulator::lockin::LockinExt;
+use paragyro_simulator::runner;
+use paragyro_simulator::scenario::{EventKind, PlantParam, PumpProfileSpec, Scenario};
+use serde::Serialize;
+
+use crate::session::Session;
+
+/// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
+/// (the replay's rule, `paragyro_firmware::run::WY2_TOL_OF_DRIFT`).
+pub const WY2_TOL_OF_DRIFT: f64 = paragyro_firmware::run::WY2_TOL_OF_DRIFT;
+/// Without a drift: |ω̂y² − ωy²| ≤ this, absolute.
+pub const WY2_TOL_NO_DRIFT: f64 = 5e-4;
+/// The loop against the host-only closed loop: |ω̂y²(FIL) − ω̂y²(host)| at the end at most
+/// this fraction of the drift (or [`WY2_TOL_NO_DRIFT`]).
+pub const WY2_FIL_VS_HOST_OF_DRIFT: f64 = 0.1;
+/// The sense amplitude "before the drift" is the mean over this long before it starts, s.
+pub const AMP_BEFORE_S: f64 = 0.5;
+/// The sense amplitude "after the retune" is the mean over the last this long of the run, s.
+pub const AMP_AFTER_S: f64 = 1.0;
+
+/// The same verdict numbers for the host-only run.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoopNumbers {
+    /// ω̂y² at the end.
+    pub wy2_est: f64,
+    /// The estimate converged.
+    pub converged: bool,
+    /// Retunes the core completed.
+    pub retunes: u32,
+    /// Sense amplitude after the retune / before the drift.
+    pub sense_amp_ratio: f64,
+    /// Samples the core flagged.
+    pub bad_ticks: u32,
+    /// Pump at the end, Hz.
+    pub pump_end_hz: f64,
+}
+
+/// The firmware's fault counters at the end, by name.
+#[derive(Clone, Debug, Serialize)]
+pub struct FwCounts {
+    /// ADC frames lost to SPI errors.
+    pub adc_spi_errors: u32,
+    /// ADC frames that failed their CRC.
+    pub adc_crc_errors: u32,
+    /// ADC frames without DRDY flags.
+    pub adc_not_ready: u32,
+    /// ADC frames with a channel at full scale.
+    pub adc_saturated: u32,
+    /// Failed accelerometer reads.
+    pub accel_errors: u32,
+    /// Accelerometer samples at the end of the range.
+    pub accel_saturated: u32,
+    /// Ticks whose DDS writes failed.
+    pub dds_errors: u32,
+    /// Commands the guard refused or clamped.
+    pub guard_clamps: u32,
+    /// DRDY missing (the board's count).
+    pub drdy_missing: u32,
+    /// The core's bad samples.
+    pub core_bad_samples: u32,
+}
+
+/// `target/fil/summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seed of the plant's noise.
+    pub seed: u64,
+    /// The pump profile the core was configured with.
+    pub core_pump_profile: String,
+    /// ω̂y² within its tolerance of the truth at the end.
+    pub converged: bool,
+    /// Retunes the firmware's core completed.
+    pub retunes: u32,
+    /// Sense amplitude (plant, |Y1|) over the last 1 s / over the 0.5 s before the drift.
+    pub sense_amp_ratio: f64,
+    /// Ticks run.
+    pub ticks: u32,
+    /// Ticks whose sample the firmware or the core flagged.
+    pub bad_ticks: u32,
+    /// Exact instructions per tick (mean), the fake chips excluded (QEMU plugin).
+    pub instr_mean: f64,
+    /// Exact instructions of the costliest tick.
+    pub instr_max: u64,
+    /// The costliest tick.
+    pub instr_max_tick: u32,
+    /// SysTick mean of the whole tick, shims included (±6 instructions per tick).
+    pub systick_mean_with_shims: f64,
+    /// ω̂y² at the end.
+    pub wy2_est: f64,
+    /// True ωy² at the end.
+    pub wy2_true: f64,
+    /// Allowed |ω̂y² − ωy²|.
+    pub wy2_tol: f64,
+    /// Pump the DDS ran at the end, Hz.
+    pub pump_end_hz: f64,
+    /// IO_UPDATE pulses the AD9959 model saw (set-up included).
+    pub io_update_pulses: u64,
+    /// Register writes the AD9959 model applied.
+    pub dds_writes: u64,
+    /// Ticks after which the DDS's channels were not phase-locked (pump 2k, refs k, 3k).
+    pub dds_unlocked_ticks: u64,
+    /// The firmware's counters.
+    pub fw_counters: FwCounts,
+    /// The firmware's exit code (0: it ended the session cleanly).
+    pub exit_code: Option<i32>,
+    /// The host-only closed loop of the same scenario (f32 core, same configuration, the
+    /// plant's pump a staircase of the core's unquantised commands).
+    pub host_only: LoopNumbers,
+    /// |ω̂y²(FIL) − ω̂y²(host)| at the end and its tolerance.
+    pub wy2_fil_vs_host: f64,
+    /// Tolerance of `wy2_fil_vs_host`.
+    pub wy2_fil_vs_host_tol: f64,
+    /// Every acceptance check held.
+    pub pass: bool,
+    /// Why not, when `pass` is false.
+    pub failures: Vec<String>,
+}
+
+/// Start of the first ωy² ramp, s (`None`: no drift in the scenario).
+pub fn drift_start_s(sc: &Scenario) -> Option<f64> {
+    sc.events.iter().find_map(|e| match e.kind {
+        EventKind::Ramp {
+            param: PlantParam::Wy2,
+            ..
+        } => Some(e.t_s),
+        _ => None,
+    })
+}
+
+/// Mean of `amp` over `t ∈ [t0, t1)`.
+fn mean_over(rows: &[(f64, f64)], t0: f64, t1: f64) -> f64 {
+    let (s, n) = rows
+        .iter()
+        .filter(|(t, _)| *t >= t0 && *t < t1)
+        .fold((0.0, 0usize), |(s, n), (_, a)| (s + a, n + 1));
+    if n == 0 { f64::NAN } else { s / n as f64 }
+}
+
+/// Sense amplitude after / before (NaN without a drift).
+pub fn sense_amp_ratio(sc: &Scenario, t_amp: &[(f64, f64)]) -> f64 {
+    let Some(t_d) = drift_start_s(sc) else {
+        return f64::NAN;
+    };
+    let before = mean_over(t_amp, t_d - AMP_BEFORE_S, t_d);
+    let after = mean_over(t_amp, sc.duration_s - AMP_AFTER_S, f64::INFINITY);
+    after / before
+}
+
+/// The allowed |ω̂y² − ωy²| at the end.
+pub fn wy2_tolerance(sc: &Scenario) -> f64 {
+    let w0 = sc.plant_at(0.0).phys[4];
+    let w1 = sc.plant_at(sc.duration_s).phys[4];
+    let drift = (w1 - w0).abs();
+    if drift > 0.0 {
+        WY2_TOL_OF_DRIFT * drift
+    } else {
+        WY2_TOL_NO_DRIFT
+    }
+}
+
+/// The host-only closed loop: the same scenario and core configuration (f32), the plant's
+/// pump a staircase (what the DDS does), no quantisation, no SPI.
+pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Result<LoopNumbers> {
+    let mut sc = sc.clone();
+    sc.sim.pump_profile = PumpProfileSpec::Staircase;
+    let cfg = crate::session::core_config(&sc, profile);
+    let mut est: Estimator<f32> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let mut amp = Vec::new();
+    let mut bad = 0u32;
+    let mut last_pump = f64::NAN;
+    let mut wy2_true = f64::NAN;
+    runner::closed_loop(
+        &sc,
+        seed,
+        &mut est,
+        |_| {},
+        |ls| {
+            amp.push((ls.t_s, ls.lockin.y_abs(1)));
+            if !ls.out.health.inputs_valid {
+                bad += 1;
+            }
+            last_pump = ls.out.pump_hz_next;
+            wy2_true = ls.plant.phys[4];
+        },
+    )?;
+    let wy2_est = est.wy2();
+    Ok(LoopNumbers {
+        wy2_est,
+        converged: (wy2_est - wy2_true).abs() <= wy2_tolerance(&sc),
+        retunes: est.counters().retunes,
+        sense_amp_ratio: sense_amp_ratio(&sc, &amp),
+        bad_ticks: bad,
+        pump_end_hz: last_pump,
+    })
+}
+
+/// What the scenario expects of the loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Expect {
+    /// At least one retune, and the sense amplitude back (ratio ≥ 1).
+    pub retune: bool,
+    /// Ticks the faults may flag (0: every sample valid).
+    pub max_bad_ticks: u32,
+}
+
+/// The summary of a session against the host-only loop.
+pub fn summarize(
+    sc: &Scenario,
+    seed: u64,
+    profile: PumpProfile,
+    s: &Session,
+    host: LoopNumbers,
+    expect: Expect,
+) -> Summary {
+    let last = s.rows.last().map(|r| r.fw);
+    let end = &s.end;
+    let c = end.counters;
+    let wy2_est = end.wy2;
+    let wy2_true = s.rows.last().map_or(f64::NAN, |r| r.wy2_true);
+    let wy2_tol = wy2_tolerance(sc);
+    let converged = (wy2_est - wy2_true).abs() <= wy2_tol;
+    let amp: Vec<(f64, f64)> = s.rows.iter().map(|r| (r.t_s, r.sense_amp_um)).collect();
+    let ratio = sense_amp_ratio(sc, &amp);
+    let bad = s
+        .rows
+        .iter()
+        .filter(|r| !(r.fw.sample_ok && r.fw.inputs_valid))
+        .count() as u32;
+    let n = s.instructions.len().max(1) as f64;
+    let instr_mean = s.instructions.iter().sum::<u64>() as f64 / n;
+    let (imax_k, imax) = s
+        .instructions
+        .iter()
+        .enumerate()
+        .max_by_key(|(_, v)| **v)
+        .map_or((0, 0), |(k, v)| (k as u32, *v));
+    let systick_mean = s
+        .rows
+        .iter()
+        .map(|r| f64::from(r.fw.tick_insns))
+        .sum::<f64>()
+        / s.rows.len().max(1) as f64;
+    let vs_host = (wy2_est - host.wy2_est).abs();
+    let vs_host_tol = if wy2_tol == WY2_TOL_NO_DRIFT {
+        WY2_TOL_NO_DRIFT
+    } else {
+        WY2_FIL_VS_HOST_OF_DRIFT * wy2_tol / WY2_TOL_OF_DRIFT
+    };
+    let mut failures = Vec::new();
+    let mut check = |ok: bool, what: String| {
+        if !ok {
+            failures.push(what);
+        }
+    };
+    check(
+        converged,
+        format!("ω̂y² {wy2_est} vs {wy2_true} (tolerance {wy2_tol:.3e})"),
+    );
+    if expect.retune {
+        check(c[9] >= 1, "the firmware did not retune".into());
+        check(
+            ratio >= 1.0,
+            format!("sense amplitude ratio {ratio:.4} < 1"),
+        );
+    }
+    check(
+        bad <= expect.max_bad_ticks,
+        format!("{bad} bad ticks (allowed {})", expect.max_bad_ticks),
+    );
+    check(
+        s.instructions.len() == s.rows.len(),
+        format!(
+            "{} instruction counts for {} ticks",
+            s.instructions.len(),
+            s.rows.len()
+        ),
+    );
+    check(
+        s.exit_code == Some(0),
+        format!("firmware exit code {:?}", s.exit_code),
+    );
+    check(
+        s.unlocked_ticks == 0,
+        format!(
+            "{} ticks with the DDS channels not phase-locked",
+            s.unlocked_ticks
+        ),
+    );
+    check(
+        host.converged == converged,
+        format!("host-only converged {} vs loop {converged}", host.converged),
+    );
+    check(
+        vs_host <= vs_host_tol,
+        format!("|ω̂y²(FIL) − ω̂y²(host)| {vs_host:.3e} > {vs_host_tol:.3e}"),
+    );
+    if expect.retune {
+        check(
+            host.retunes >= 1 && host.sense_amp_ratio >= 1.0,
+            "the host-only loop did not retune".into(),
+        );
+    }
+    let _ = last;
+    Summary {
+        scenario: sc.name.clone(),
+        seed,
+        core_pump_profile: format!("{profile:?}"),
+        converged,
+        retunes: c[9],
+        sense_amp_ratio: ratio,
+        ticks: s.rows.len() as u32,
+        bad_ticks: bad,
+        instr_mean,
+        instr_max: imax,
+        instr_max_tick: imax_k,
+        systick_mean_with_shims: systick_mean,
+        wy2_est,
+        wy2_true,
+        wy2_tol,
+        pump_end_hz: s.rows.last().map_or(f64::NAN, |r| r.dds_pump_hz),
+        io_update_pulses: s.pulses,
+        dds_writes: s.dds_writes,
+        dds_unlocked_ticks: s.unlocked_ticks,
+        fw_counters: FwCounts {
+            adc_spi_errors: c[0],
+            adc_crc_errors: c[1],
+            adc_not_ready: c[2],
+            adc_saturated: c[3],
+            accel_errors: c[4],
+            accel_saturated: c[5],
+            dds_errors: c[6],
+            guard_clamps: c[7],
+            drdy_missing: c[8],
+            core_bad_samples: c[10],
+        },
+        exit_code: s.exit_code,
+        host_only: host,
+        wy2_fil_vs_host: vs_host,
+        wy2_fil_vs_host_tol: vs_host_tol,
+        pass: failures.is_empty(),
+        failures,
+    }
+}
