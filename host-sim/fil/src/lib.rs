@@ -23,7 +23,7 @@ pub mod verdict;
 use std::path::{Path, PathBuf};
 
 use paragyro_core::config::PumpProfile;
-use paragyro_simulator::scenario::Scenario;
+use paragyro_simulator::scenario::{EventKind, EventSpec, PlantParam, Scenario};
 
 pub use chips::Faults;
 pub use verdict::{Expect, Summary};
@@ -53,8 +53,80 @@ pub fn drift_retune() -> anyhow::Result<LoopScenario> {
         expect: Expect {
             retune: true,
             max_bad_ticks: 0,
+            rate: false,
         },
     })
+}
+
+/// `drift-retune`'s device without the drift: the plant stays at ωy² = 1.0265 and the rate
+/// at its start value, the events removed, `duration_s` long.
+fn steady(name: &str, duration_s: f64) -> anyhow::Result<LoopScenario> {
+    let mut ls = drift_retune()?;
+    ls.name = name.into();
+    ls.scenario.name = format!("fil-{name}");
+    ls.scenario.duration_s = duration_s;
+    ls.scenario.events.clear();
+    ls.expect = Expect {
+        retune: false,
+        max_bad_ticks: 0,
+        rate: true,
+    };
+    Ok(ls)
+}
+
+/// Start-up identification: 4 s from the off-plant nominal design (ωy² 1.03 against the
+/// plant's 1.0265, the other parameters 3–10 % off), the gate, the dither from 1 s; ω̂y²
+/// within 5e-4 and the rate within 2 % of the truth at the end.
+pub fn startup() -> anyhow::Result<LoopScenario> {
+    steady("startup", 4.0)
+}
+
+/// A rate step: the start-up, then the rate steps 150 → 100 °/s at 3 s; 6 s; the rate
+/// within 2 % of the new truth at the end.
+pub fn rate_step() -> anyhow::Result<LoopScenario> {
+    let mut ls = steady("rate-step", 6.0)?;
+    ls.scenario.events.push(EventSpec {
+        t_s: 3.0,
+        kind: EventKind::Ramp {
+            param: PlantParam::RateDps,
+            to: 100.0,
+            duration_s: 0.0,
+        },
+    });
+    Ok(ls)
+}
+
+/// `drift-retune` with SPI faults: five CRC errors on the drive-axis ADC (ticks
+/// 1500–1504), a missing DRDY (tick 4200), the AD9959's serial port failing for 10 ticks
+/// while the dither moves the pump (1400–1409), the accelerometer stuck for 0.1 s
+/// (4500–4549; not an SPI error: the core cannot tell a stuck accelerometer from the
+/// simulated constant acceleration, so it is only survived). Every SPI fault must be flagged and counted on exactly its ticks, and the
+/// run must still converge and retune.
+pub fn spi_faults() -> anyhow::Result<LoopScenario> {
+    use paragyro_firmware::replay::Span;
+    let mut ls = drift_retune()?;
+    ls.name = "spi-faults".into();
+    ls.faults = Faults {
+        crc: Span::new(1500, 1505),
+        no_drdy: Span::new(4200, 4201),
+        stuck_accel: Span::new(4500, 4550),
+        dds_fail: Span::new(1400, 1410),
+    };
+    ls.expect.max_bad_ticks = 6;
+    Ok(ls)
+}
+
+/// The loop scenarios by name.
+pub fn by_name(name: &str) -> anyhow::Result<LoopScenario> {
+    match name {
+        "drift-retune" => drift_retune(),
+        "startup" => startup(),
+        "rate-step" => rate_step(),
+        "spi-faults" => spi_faults(),
+        other => anyhow::bail!(
+            "unknown loop scenario `{other}` (known: drift-retune, startup, rate-step, spi-faults)"
+        ),
+    }
 }
 
 /// Runs `ls` with the image `elf` and the plugin, writes `out/summary.json` and returns the
@@ -84,7 +156,15 @@ pub fn run(
     });
     let fil = fil?;
     let host = host.map_err(|_| anyhow::anyhow!("the host-only loop's thread panicked"))??;
-    let summary = verdict::summarize(&ls.scenario, seed, profile, &fil, host, ls.expect);
+    let summary = verdict::summarize(
+        &ls.scenario,
+        seed,
+        profile,
+        &fil,
+        host,
+        ls.expect,
+        &ls.faults,
+    );
     std::fs::create_dir_all(out)?;
     std::fs::write(
         out.join("summary.json"),

@@ -19,7 +19,7 @@ enum Profile {
 #[derive(Parser, Debug)]
 #[command(name = "paragyro-fil")]
 struct Cli {
-    /// The loop scenario.
+    /// The loop scenario: drift-retune, startup, rate-step, spi-faults.
     #[arg(default_value = "drift-retune")]
     scenario: String,
     /// Output directory (summary.json, logs, pipes).
@@ -49,16 +49,21 @@ fn main() -> ExitCode {
 
 fn run() -> anyhow::Result<bool> {
     let cli = Cli::parse();
-    let ls = match cli.scenario.as_str() {
-        "drift-retune" => paragyro_fil::drift_retune()?,
-        other => anyhow::bail!("unknown loop scenario `{other}` (known: drift-retune)"),
-    };
-    let out = cli.out.unwrap_or_else(paragyro_fil::default_out);
+    let ls = paragyro_fil::by_name(&cli.scenario)?;
+    let out = cli.out.unwrap_or_else(|| {
+        let d = paragyro_fil::default_out();
+        if ls.name == "drift-retune" {
+            d
+        } else {
+            d.join(&ls.name)
+        }
+    });
     let elf = match cli.elf {
         Some(e) => e,
         None => {
             eprintln!("paragyro-fil: building the fil firmware");
-            paragyro_fil::build::firmware(&out.join("build"), &out)?
+            let fil = paragyro_fil::default_out();
+            paragyro_fil::build::firmware(&fil.join("build"), &fil)?
         }
     };
     let plugin = paragyro_fil::build::plugin(&out)?;

@@ -61,6 +61,8 @@ pub struct TickRow {
     pub t_s: f64,
     /// True ωy².
     pub wy2_true: f64,
+    /// True rate, °/s.
+    pub rate_dps_true: f64,
     /// The plant's sense amplitude |Y1|, µm.
     pub sense_amp_um: f64,
     /// The pump the DDS ran over the interval after this tick, Hz.
@@ -401,6 +403,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         rows.push(TickRow {
             t_s: t,
             wy2_true: pa.phys[4],
+            rate_dps_true: pa.rate_dps,
             sense_amp_um: li.y_abs(1),
             dds_pump_hz: dds.pump_hz(),
             fw,

@@ -8,6 +8,7 @@ use paragyro_simulator::runner;
 use paragyro_simulator::scenario::{EventKind, PlantParam, PumpProfileSpec, Scenario};
 use serde::Serialize;
 
+use crate::chips::Faults;
 use crate::session::Session;
 
 /// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
@@ -18,6 +19,13 @@ pub const WY2_TOL_NO_DRIFT: f64 = 5e-4;
 /// The loop against the host-only closed loop: |ω̂y²(FIL) − ω̂y²(host)| at the end at most
 /// this fraction of the drift (or [`WY2_TOL_NO_DRIFT`]).
 pub const WY2_FIL_VS_HOST_OF_DRIFT: f64 = 0.1;
+/// The rate estimate at the end within this fraction of the true rate (where the scenario
+/// checks the rate; the staircase pump with the ZOH replica biases the rate by +1.2 % on
+/// `identify`, README "Pump profile").
+pub const RATE_TOL_FRAC: f64 = 0.02;
+/// The loop against the host-only loop: |rate(FIL) − rate(host)| at the end at most this
+/// fraction of the true rate.
+pub const RATE_FIL_VS_HOST_FRAC: f64 = 0.01;
 /// The sense amplitude "before the drift" is the mean over this long before it starts, s.
 pub const AMP_BEFORE_S: f64 = 0.5;
 /// The sense amplitude "after the retune" is the mean over the last this long of the run, s.
@@ -38,6 +46,8 @@ pub struct LoopNumbers {
     pub bad_ticks: u32,
     /// Pump at the end, Hz.
     pub pump_end_hz: f64,
+    /// Rate estimate at the end, °/s.
+    pub rate_dps_est: f64,
 }
 
 /// The firmware's fault counters at the end, by name.
@@ -108,6 +118,14 @@ pub struct Summary {
     pub dds_unlocked_ticks: u64,
     /// The firmware's counters.
     pub fw_counters: FwCounts,
+    /// Ticks whose fault bits say the DDS write failed.
+    pub dds_fault_ticks: u32,
+    /// Ticks whose fault bits say an ADC frame was lost (CRC, not ready, SPI).
+    pub adc_fault_ticks: u32,
+    /// Rate estimate at the end, °/s.
+    pub rate_dps_est: f64,
+    /// True rate at the end, °/s.
+    pub rate_dps_true: f64,
     /// The firmware's exit code (0: it ended the session cleanly).
     pub exit_code: Option<i32>,
     /// The host-only closed loop of the same scenario (f32 core, same configuration, the
@@ -200,6 +218,7 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         sense_amp_ratio: sense_amp_ratio(&sc, &amp),
         bad_ticks: bad,
         pump_end_hz: last_pump,
+        rate_dps_est: est.rate_dps(),
     })
 }
 
@@ -210,6 +229,8 @@ pub struct Expect {
     pub retune: bool,
     /// Ticks the faults may flag (0: every sample valid).
     pub max_bad_ticks: u32,
+    /// The rate estimate at the end within [`RATE_TOL_FRAC`] of the truth.
+    pub rate: bool,
 }
 
 /// The summary of a session against the host-only loop.
@@ -220,6 +241,7 @@ pub fn summarize(
     s: &Session,
     host: LoopNumbers,
     expect: Expect,
+    faults: &Faults,
 ) -> Summary {
     let last = s.rows.last().map(|r| r.fw);
     let end = &s.end;
@@ -310,6 +332,68 @@ pub fn summarize(
         );
     }
     let _ = last;
+    let rate_est = end.rate_dps;
+    let rate_true = s.rows.last().map_or(f64::NAN, |r| r.rate_dps_true);
+    if expect.rate {
+        let tol = RATE_TOL_FRAC * rate_true.abs();
+        check(
+            (rate_est - rate_true).abs() <= tol,
+            format!("rate {rate_est:.4} °/s vs {rate_true:.4} (tolerance {tol:.3})"),
+        );
+    }
+    let tol = RATE_FIL_VS_HOST_FRAC * rate_true.abs();
+    check(
+        (rate_est - host.rate_dps_est).abs() <= tol,
+        format!(
+            "rate {rate_est:.4} °/s vs host-only {:.4} (tolerance {tol:.3})",
+            host.rate_dps_est
+        ),
+    );
+    let fault = |bit: u8| s.rows.iter().filter(move |r| r.fw.faults & bit != 0);
+    use paragyro_firmware::app::fault;
+    let dds_fault_ticks = fault(fault::DDS).count() as u32;
+    let adc_fault_ticks = fault(fault::ADC_X | fault::ADC_Y).count() as u32;
+    // every injected fault flagged and counted, none elsewhere
+    let span_len = |sp: paragyro_firmware::replay::Span| {
+        sp.end.min(s.rows.len()).saturating_sub(sp.start) as u32
+    };
+    check(
+        c[1] == span_len(faults.crc),
+        format!(
+            "{} CRC errors counted for {} injected",
+            c[1],
+            span_len(faults.crc)
+        ),
+    );
+    check(
+        c[8] == span_len(faults.no_drdy) && c[2] == 2 * span_len(faults.no_drdy),
+        format!(
+            "missing DRDY: {} counted, {} frames not ready, for {} injected",
+            c[8],
+            c[2],
+            span_len(faults.no_drdy)
+        ),
+    );
+    let in_span = |sp: paragyro_firmware::replay::Span, bit: u8| {
+        s.rows
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.fw.faults & bit != 0)
+            .all(|(k, _)| sp.contains(k))
+    };
+    check(
+        c[6] == dds_fault_ticks
+            && in_span(faults.dds_fail, fault::DDS)
+            && (dds_fault_ticks > 0) == (span_len(faults.dds_fail) > 0),
+        format!(
+            "{} DDS errors counted, {dds_fault_ticks} ticks flagged",
+            c[6]
+        ),
+    );
+    check(
+        adc_fault_ticks == span_len(faults.crc) + span_len(faults.no_drdy),
+        format!("{adc_fault_ticks} ticks with a lost ADC frame"),
+    );
     Summary {
         scenario: sc.name.clone(),
         seed,
@@ -342,6 +426,10 @@ pub fn summarize(
             drdy_missing: c[8],
             core_bad_samples: c[10],
         },
+        dds_fault_ticks,
+        adc_fault_ticks,
+        rate_dps_est: rate_est,
+        rate_dps_true: rate_true,
         exit_code: s.exit_code,
         host_only: host,
         wy2_fil_vs_host: vs_host,
