@@ -302,6 +302,8 @@ pub struct FromFw {
     pub pulse_at_insns: u32,
     /// SysTick instructions (±6) of the whole tick, shims included.
     pub tick_insns: u32,
+    /// The stack's high-water mark since boot, bytes (painted stack; in the end answer).
+    pub stack_peak: u32,
     /// The DDS log: `len` then `len` bytes per write, `0` for an IO_UPDATE pulse.
     pub dds_log: [u8; DDS_LOG_BYTES],
     /// Bytes of `dds_log` used.
@@ -326,6 +328,7 @@ impl FromFw {
         counters: [0; COUNTERS],
         pulse_at_insns: 0,
         tick_insns: 0,
+        stack_peak: 0,
         dds_log: [0; DDS_LOG_BYTES],
         dds_log_len: 0,
     };
@@ -363,7 +366,7 @@ impl FromFw {
         }
         p.u32(self.pulse_at_insns);
         p.u32(self.tick_insns);
-        p.u32(0);
+        p.u32(self.stack_peak);
         p.u16(self.dds_log_len);
         p.bytes(&self.dds_log);
         b
@@ -386,7 +389,7 @@ impl FromFw {
         }
         let pulse_at_insns = g.u32();
         let tick_insns = g.u32();
-        let _ = g.u32();
+        let stack_peak = g.u32();
         let dds_log_len = g.u16();
         Self {
             tick,
@@ -404,6 +407,7 @@ impl FromFw {
             counters,
             pulse_at_insns,
             tick_insns,
+            stack_peak,
             dds_log: g.array(),
             dds_log_len,
         }

@@ -18,15 +18,15 @@
 //! telemetry. With the `capture` feature every tick's inputs are streamed as `CAP` lines
 //! (`paragyro-fw-replay capture` turns the log into a record).
 //!
-//! Flash and run (defmt over RTT):
-//! `probe-rs run --chip STM32F405RGTx target/thumbv7em-none-eabihf/release/paragyro-firmware`
-//! (or `cargo run -p paragyro-firmware --target thumbv7em-none-eabihf --release
-//! --no-default-features --features stm32f405` with `PARAGYRO_RUNNER=probe-rs`, see
-//! firmware/README.md).
+//! Build, flash and run (defmt over RTT; firmware/README.md): `cargo fw-stm32-run` (probe-rs
+//! as the runner, flip-link as the linker), or `cargo fw-stm32` and then
+//! `probe-rs run --chip STM32F405RGTx target/thumbv7em-none-eabihf/release/paragyro-firmware`.
 //!
 //! **Calibration.** [`CAL_X_UM_PER_VOLT`] and [`CAL_Y_UM_PER_VOLT`] are the analog
 //! front end's design scale (the values the replay table uses); a built board replaces
-//! them by its bench calibration. Compile-checked in CI only: no board has run it yet.
+//! them by its bench calibration. **Pump profile**: the configuration is `Config::table2()`
+//! with `pump_profile = Staircase`, what this board's DDS does (written and pulsed once
+//! per tick). Compile-checked in CI only: no board has run it yet.
 //!
 //! [`App::tick`]: paragyro_firmware::app::App::tick
 
@@ -39,6 +39,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 use embedded_hal_bus::spi::{ExclusiveDevice, RefCellDevice};
 use paragyro_core::Config;
+use paragyro_core::config::PumpProfile;
 use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
 use paragyro_firmware::drivers::ad9959::Ad9959;
 use paragyro_firmware::drivers::ads131m08::{self, Ads131m08};
@@ -176,7 +177,12 @@ fn main() -> ! {
         io.pulse();
     }
 
-    let cfg = Config::table2();
+    // The AD9959 is written once per tick without its linear-sweep mode: the pump steps at
+    // IO_UPDATE and holds, so the core's replica must assume a staircase (measured in the
+    // loop, firmware/README.md "Firmware in the loop": with the `Linear` replica the
+    // retune never happens and the sense amplitude falls to 0.57 of its start).
+    let mut cfg = Config::table2();
+    cfg.pump_profile = PumpProfile::Staircase;
     let chips = Chips {
         adc_x,
         adc_y,

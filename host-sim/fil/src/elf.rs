@@ -77,3 +77,46 @@ pub fn markers(elf: &[u8]) -> anyhow::Result<[u32; 4]> {
         address_of(&syms, "3fil9fake_exit")?,
     ])
 }
+
+/// Size of every section by name.
+pub fn section_sizes(elf: &[u8]) -> anyhow::Result<Vec<(String, u64)>> {
+    ensure!(
+        elf.get(..6) == Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]),
+        "not a little-endian ELF32 file"
+    );
+    let shoff = u32_at(elf, 0x20)? as usize;
+    let shentsize = u16_at(elf, 0x2E)? as usize;
+    let shnum = u16_at(elf, 0x30)? as usize;
+    let shstrndx = u16_at(elf, 0x32)? as usize;
+    let hdr = |i: usize| shoff + i * shentsize;
+    let str_off = u32_at(elf, hdr(shstrndx) + 16)? as usize;
+    let mut out = Vec::new();
+    for i in 0..shnum {
+        let name = u32_at(elf, hdr(i))? as usize;
+        let size = u64::from(u32_at(elf, hdr(i) + 20)?);
+        let rest = elf.get(str_off + name..).context("section name")?;
+        let end = rest.iter().position(|&c| c == 0).unwrap_or(rest.len());
+        out.push((String::from_utf8_lossy(&rest[..end]).into_owned(), size));
+    }
+    Ok(out)
+}
+
+/// Flash and static RAM of an image, as firmware/scripts/fw-size.sh counts them: flash =
+/// .vector_table + .text + .rodata + .data (its load image), static RAM = .data + .bss +
+/// .uninit.
+pub fn flash_and_ram(elf: &[u8]) -> anyhow::Result<(u64, u64)> {
+    let mut flash = 0;
+    let mut ram = 0;
+    for (name, size) in section_sizes(elf)? {
+        match name.as_str() {
+            ".vector_table" | ".text" | ".rodata" => flash += size,
+            ".data" => {
+                flash += size;
+                ram += size;
+            }
+            ".bss" | ".uninit" => ram += size,
+            _ => {}
+        }
+    }
+    Ok((flash, ram))
+}

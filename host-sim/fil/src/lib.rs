@@ -11,9 +11,11 @@
 //! * [`session`]: the exchange and the plant;
 //! * [`chips`]: the chips' bytes, and the faults a scenario injects;
 //! * [`verdict`]: the acceptance checks, `summary.json`, the host-only closed loop;
+//! * [`budget`]: flash, RAM and tick budgets (CI);
 //! * [`build`]: the `fil` image and the instruction-count plugin;
 //! * [`elf`]: the plugin's marker addresses from the image.
 
+pub mod budget;
 pub mod build;
 pub mod chips;
 pub mod elf;

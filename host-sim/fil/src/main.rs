@@ -47,7 +47,55 @@ fn main() -> ExitCode {
     }
 }
 
+/// `paragyro-fil budget STM32F405_ELF [SUMMARY_JSON]`: the budgets (budget.rs).
+fn budget(args: &[String]) -> anyhow::Result<bool> {
+    let [elf, rest @ ..] = args else {
+        anyhow::bail!("usage: paragyro-fil budget STM32F405_ELF [SUMMARY_JSON]");
+    };
+    let summary_path = rest
+        .first()
+        .map(PathBuf::from)
+        .unwrap_or_else(|| paragyro_fil::default_out().join("summary.json"));
+    let text = std::fs::read_to_string(&summary_path).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {e} (run `cargo fw-loop` first)",
+            summary_path.display()
+        )
+    })?;
+    let summary: paragyro_fil::Summary = serde_json::from_str(&text)?;
+    let b = paragyro_fil::budget::check(&std::fs::read(elf)?, &summary)?;
+    use paragyro_fil::budget as bu;
+    println!(
+        "flash {} B (budget {} B); static RAM {} B + stack peak {} B = {} B (budget {} B)",
+        b.flash,
+        bu::FLASH_BUDGET,
+        b.ram_static,
+        b.stack_peak,
+        b.ram_static + b.stack_peak,
+        bu::RAM_BUDGET
+    );
+    println!(
+        "tick: mean {:.0}, max {} instructions (exact, no fake chips); guards {} / {}; targets {} / {} NOT met (gap {:.0} / {})",
+        b.instr_mean,
+        b.instr_max,
+        bu::TICK_MEAN_GUARD,
+        bu::TICK_MAX_GUARD,
+        bu::TICK_MEAN_TARGET,
+        bu::TICK_MAX_TARGET,
+        b.instr_mean - bu::TICK_MEAN_TARGET,
+        b.instr_max.saturating_sub(bu::TICK_MAX_TARGET)
+    );
+    for f in &b.failures {
+        eprintln!("  over budget: {f}");
+    }
+    Ok(b.failures.is_empty())
+}
+
 fn run() -> anyhow::Result<bool> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("budget") {
+        return budget(&args[1..]);
+    }
     let cli = Cli::parse();
     let ls = paragyro_fil::by_name(&cli.scenario)?;
     let out = cli.out.unwrap_or_else(|| {

@@ -6,7 +6,7 @@ use paragyro_core::config::PumpProfile;
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::runner;
 use paragyro_simulator::scenario::{EventKind, PlantParam, PumpProfileSpec, Scenario};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::chips::Faults;
 use crate::session::Session;
@@ -32,7 +32,7 @@ pub const AMP_BEFORE_S: f64 = 0.5;
 pub const AMP_AFTER_S: f64 = 1.0;
 
 /// The same verdict numbers for the host-only run.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LoopNumbers {
     /// ω̂y² at the end.
     pub wy2_est: f64,
@@ -51,7 +51,7 @@ pub struct LoopNumbers {
 }
 
 /// The firmware's fault counters at the end, by name.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FwCounts {
     /// ADC frames lost to SPI errors.
     pub adc_spi_errors: u32,
@@ -76,7 +76,7 @@ pub struct FwCounts {
 }
 
 /// `target/fil/summary.json`.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Summary {
     /// Scenario name.
     pub scenario: String,
@@ -96,6 +96,8 @@ pub struct Summary {
     pub bad_ticks: u32,
     /// Exact instructions per tick (mean), the fake chips excluded (QEMU plugin).
     pub instr_mean: f64,
+    /// The stack's high-water mark of the `fil` board, bytes (painted, measured).
+    pub stack_peak_bytes: u32,
     /// Exact instructions of the costliest tick.
     pub instr_max: u64,
     /// The costliest tick.
@@ -404,6 +406,7 @@ pub fn summarize(
         ticks: s.rows.len() as u32,
         bad_ticks: bad,
         instr_mean,
+        stack_peak_bytes: end.stack_peak,
         instr_max: imax,
         instr_max_tick: imax_k,
         systick_mean_with_shims: systick_mean,
