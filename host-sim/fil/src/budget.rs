@@ -75,11 +75,24 @@ pub fn check(elf: &[u8], summary: &Summary) -> anyhow::Result<Budgets> {
 /// The tick's regression guards.
 pub fn tick_guard(mean: f64, max: u64) -> Vec<String> {
     let mut f = Vec::new();
-    if !(mean <= TICK_MEAN_GUARD) {
+    if mean.is_nan() || mean > TICK_MEAN_GUARD {
         f.push(format!("tick mean {mean:.0} > guard {TICK_MEAN_GUARD}"));
     }
     if max > TICK_MAX_GUARD {
         f.push(format!("tick max {max} > guard {TICK_MAX_GUARD}"));
     }
     f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tick_guard_flags_a_regression_and_nan() {
+        assert!(tick_guard(17_829.0, 24_346).is_empty());
+        assert_eq!(tick_guard(18_001.0, 24_346).len(), 1);
+        assert_eq!(tick_guard(17_000.0, 24_601).len(), 1);
+        assert_eq!(tick_guard(f64::NAN, 0).len(), 1);
+    }
 }

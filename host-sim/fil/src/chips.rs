@@ -163,3 +163,99 @@ impl Dds {
         self.cap.active().phase_locked()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use paragyro_firmware::drivers::ad9959::{Channel, PumpPlan};
+    use paragyro_firmware::drivers::ads131m08::Status;
+    use paragyro_firmware::drivers::adxl355::raw20_from_bytes;
+    use paragyro_firmware::fil::DDS_LOG_BYTES;
+
+    fn channels() -> [f64; 14] {
+        std::array::from_fn(|i| (i as f64 - 6.5) * 0.37)
+    }
+
+    #[test]
+    fn adc_frames_decode_to_the_plant_values_and_faults_show() {
+        let faults = Faults {
+            crc: Span::at(3),
+            no_drdy: Span::at(5),
+            ..Faults::default()
+        };
+        let chips = SensorChips::new([8.0, 4.0], Range::G8, faults);
+        let ch = channels();
+        let [x, y] = chips.adc_frames(0, &ch);
+        for (axis, bytes) in [x, y].iter().enumerate() {
+            let f = Frame::decode(bytes).expect("valid CRC");
+            assert!(f.status().lockin_ready());
+            let cal = calibration([8.0, 4.0][axis]);
+            let u = cal.to_um(&f.lockin_codes());
+            let um = [
+                u.x0_um, u.re_um[0], u.im_um[0], u.re_um[1], u.im_um[1], u.re_um[2], u.im_um[2],
+            ];
+            for i in 0..7 {
+                let step = f64::from(cal.um_per_code[i]);
+                assert!((f64::from(um[i]) - ch[7 * axis + i]).abs() <= 0.51 * step);
+            }
+        }
+        // a CRC error on the drive axis only, at tick 3
+        let [x, y] = chips.adc_frames(3, &ch);
+        assert!(Frame::decode(&x).is_err() && Frame::decode(&y).is_ok());
+        // no DRDY at tick 5: both frames valid but not ready
+        let [x, y] = chips.adc_frames(5, &ch);
+        for b in [x, y] {
+            let f = Frame::decode(&b).unwrap();
+            assert_eq!(f.status(), Status(STATUS_NOT_READY));
+            assert!(!f.status().lockin_ready());
+        }
+        assert!(!chips.drdy(5) && chips.drdy(4));
+    }
+
+    #[test]
+    fn accel_burst_encodes_and_a_stuck_accelerometer_repeats() {
+        let faults = Faults {
+            stuck_accel: Span::new(2, 4),
+            ..Faults::default()
+        };
+        let mut chips = SensorChips::new([8.0, 4.0], Range::G8, faults);
+        let b = chips.accel_burst(0, 39.2266, -12.0);
+        assert_eq!(b[0] & 1, 1);
+        let lsb = f64::from(Range::G8.mps2_per_lsb());
+        let x = f64::from(raw20_from_bytes([b[4], b[5], b[6]])) * lsb;
+        let y = f64::from(raw20_from_bytes([b[7], b[8], b[9]])) * lsb;
+        assert!((x - 39.2266).abs() <= lsb && (y + 12.0).abs() <= lsb);
+        let held = chips.accel_burst(2, 1.0, 1.0);
+        assert_eq!(chips.accel_burst(3, 5.0, 5.0), held);
+        assert_ne!(chips.accel_burst(4, 5.0, 5.0), held);
+    }
+
+    #[test]
+    fn the_dds_model_applies_words_at_io_update_only() {
+        let plan = PumpPlan::new(21_900.0, DEFAULT_SYSCLK_HZ).unwrap();
+        let mut log = Vec::new();
+        for (ch, ftw) in [
+            (Channel::PUMP, plan.pump_ftw()),
+            (Channel::REFERENCE, plan.reference_ftw()),
+            (Channel::THIRD, plan.third_ftw()),
+        ] {
+            log.extend_from_slice(&[2, 0x00, ch.csr_enable() | 0x02]);
+            log.push(5);
+            log.push(0x04);
+            log.extend_from_slice(&ftw.to_be_bytes());
+        }
+        let mut m = FromFw::EMPTY;
+        m.dds_log[..log.len()].copy_from_slice(&log);
+        m.dds_log_len = log.len() as u16;
+        let mut dds = Dds::new();
+        assert_eq!(dds.apply(&m).unwrap(), 0);
+        assert_eq!(dds.pump_hz(), 0.0, "buffered, not active before IO_UPDATE");
+        m.dds_log[log.len()] = 0;
+        m.dds_log_len += 1;
+        assert!(usize::from(m.dds_log_len) <= DDS_LOG_BYTES);
+        let mut dds = Dds::new();
+        assert_eq!(dds.apply(&m).unwrap(), 1);
+        assert_eq!(dds.pump_hz(), plan.pump_hz());
+        assert!(dds.phase_locked());
+    }
+}
