@@ -154,3 +154,31 @@ fn a_linear_replica_on_the_stepping_dds_does_not_retune() {
     assert_eq!(s.retunes, 0);
     assert!(s.sense_amp_ratio < 0.8, "ratio {}", s.sense_amp_ratio);
 }
+
+/// The drive falls out of its band (ωx² 1 → 1.1): the drive dies, the core flags it
+/// (`drive_locked` cleared, as in the host-only loop) and does not retune on it; every
+/// sample stays valid and the pump inside the guard.
+#[test]
+fn the_drive_falling_out_of_its_band_is_flagged() {
+    if skip() {
+        return;
+    }
+    let s = run(
+        &paragyro_fil::out_of_band().unwrap(),
+        PumpProfile::Staircase,
+    );
+    assert_pass(&s);
+    assert!(
+        s.drive_amp_ratio < 0.01,
+        "drive ratio {}",
+        s.drive_amp_ratio
+    );
+    assert_eq!(
+        s.host_only.health_end & paragyro_fil::verdict::DRIVE_LOCKED_BIT,
+        0
+    );
+    assert_eq!(
+        (s.retunes, s.bad_ticks, s.fw_counters.guard_clamps),
+        (0, 0, 0)
+    );
+}

@@ -56,6 +56,7 @@ pub fn drift_retune() -> anyhow::Result<LoopScenario> {
             retune: true,
             max_bad_ticks: 0,
             rate: false,
+            out_of_band: false,
         },
     })
 }
@@ -72,6 +73,7 @@ fn steady(name: &str, duration_s: f64) -> anyhow::Result<LoopScenario> {
         retune: false,
         max_bad_ticks: 0,
         rate: true,
+        out_of_band: false,
     };
     Ok(ls)
 }
@@ -118,6 +120,32 @@ pub fn spi_faults() -> anyhow::Result<LoopScenario> {
     Ok(ls)
 }
 
+/// The drive falls out of its band: `drift-retune`'s device with ωx² ramping 1 → 1.1 at
+/// 2–2.5 s instead of the ωy² drift (the drive's principal parametric band moves ≈ 5 % up,
+/// away from the pump). The drive dies; the core must flag it (`drive_locked` cleared at
+/// the end, as in the host-only loop), must not retune on it, and the firmware must keep
+/// every sample valid and its pump inside the guard.
+pub fn out_of_band() -> anyhow::Result<LoopScenario> {
+    let mut ls = drift_retune()?;
+    ls.name = "out-of-band".into();
+    ls.scenario.name = "fil-out-of-band".into();
+    for e in ls.scenario.events.iter_mut() {
+        if let EventKind::Ramp { param, to, .. } = &mut e.kind
+            && *param == PlantParam::Wy2
+        {
+            *param = PlantParam::Wx2;
+            *to = 1.1;
+        }
+    }
+    ls.expect = Expect {
+        retune: false,
+        max_bad_ticks: 0,
+        rate: false,
+        out_of_band: true,
+    };
+    Ok(ls)
+}
+
 /// The loop scenarios by name.
 pub fn by_name(name: &str) -> anyhow::Result<LoopScenario> {
     match name {
@@ -125,8 +153,9 @@ pub fn by_name(name: &str) -> anyhow::Result<LoopScenario> {
         "startup" => startup(),
         "rate-step" => rate_step(),
         "spi-faults" => spi_faults(),
+        "out-of-band" => out_of_band(),
         other => anyhow::bail!(
-            "unknown loop scenario `{other}` (known: drift-retune, startup, rate-step, spi-faults)"
+            "unknown loop scenario `{other}` (known: drift-retune, startup, rate-step, spi-faults, out-of-band)"
         ),
     }
 }

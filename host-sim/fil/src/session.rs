@@ -65,6 +65,8 @@ pub struct TickRow {
     pub rate_dps_true: f64,
     /// The plant's sense amplitude |Y1|, µm.
     pub sense_amp_um: f64,
+    /// The plant's drive amplitude |X1|, µm.
+    pub drive_amp_um: f64,
     /// The pump the DDS ran over the interval after this tick, Hz.
     pub dds_pump_hz: f64,
     /// The firmware's answer.
@@ -405,6 +407,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
             wy2_true: pa.phys[4],
             rate_dps_true: pa.rate_dps,
             sense_amp_um: li.y_abs(1),
+            drive_amp_um: li.x_abs(1),
             dds_pump_hz: dds.pump_hz(),
             fw,
         });

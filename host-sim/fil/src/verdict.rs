@@ -42,12 +42,16 @@ pub struct LoopNumbers {
     pub retunes: u32,
     /// Sense amplitude after the retune / before the drift.
     pub sense_amp_ratio: f64,
+    /// Drive amplitude over the last 1 s / over the 0.5 s before the drift.
+    pub drive_amp_ratio: f64,
     /// Samples the core flagged.
     pub bad_ticks: u32,
     /// Pump at the end, Hz.
     pub pump_end_hz: f64,
     /// Rate estimate at the end, °/s.
     pub rate_dps_est: f64,
+    /// Health bits at the end.
+    pub health_end: u32,
 }
 
 /// The firmware's fault counters at the end, by name.
@@ -90,6 +94,8 @@ pub struct Summary {
     pub retunes: u32,
     /// Sense amplitude (plant, |Y1|) over the last 1 s / over the 0.5 s before the drift.
     pub sense_amp_ratio: f64,
+    /// Drive amplitude (plant, |X1|), same windows.
+    pub drive_amp_ratio: f64,
     /// Ticks run.
     pub ticks: u32,
     /// Ticks whose sample the firmware or the core flagged.
@@ -128,6 +134,8 @@ pub struct Summary {
     pub rate_dps_est: f64,
     /// True rate at the end, °/s.
     pub rate_dps_true: f64,
+    /// The core's health bits after the last tick.
+    pub health_end: u32,
     /// The firmware's exit code (0: it ended the session cleanly).
     pub exit_code: Option<i32>,
     /// The host-only closed loop of the same scenario (f32 core, same configuration, the
@@ -143,11 +151,11 @@ pub struct Summary {
     pub failures: Vec<String>,
 }
 
-/// Start of the first ωy² ramp, s (`None`: no drift in the scenario).
+/// Start of the first ramp of ωy² or ωx², s (`None`: no drift in the scenario).
 pub fn drift_start_s(sc: &Scenario) -> Option<f64> {
     sc.events.iter().find_map(|e| match e.kind {
         EventKind::Ramp {
-            param: PlantParam::Wy2,
+            param: PlantParam::Wy2 | PlantParam::Wx2,
             ..
         } => Some(e.t_s),
         _ => None,
@@ -195,8 +203,10 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         .build()
         .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
     let mut amp = Vec::new();
+    let mut damp = Vec::new();
     let mut bad = 0u32;
     let mut last_pump = f64::NAN;
+    let mut health_end = 0;
     let mut wy2_true = f64::NAN;
     runner::closed_loop(
         &sc,
@@ -205,10 +215,12 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         |_| {},
         |ls| {
             amp.push((ls.t_s, ls.lockin.y_abs(1)));
+            damp.push((ls.t_s, ls.lockin.x_abs(1)));
             if !ls.out.health.inputs_valid {
                 bad += 1;
             }
             last_pump = ls.out.pump_hz_next;
+            health_end = ls.out.health.bits();
             wy2_true = ls.plant.phys[4];
         },
     )?;
@@ -218,9 +230,11 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         converged: (wy2_est - wy2_true).abs() <= wy2_tolerance(&sc),
         retunes: est.counters().retunes,
         sense_amp_ratio: sense_amp_ratio(&sc, &amp),
+        drive_amp_ratio: sense_amp_ratio(&sc, &damp),
         bad_ticks: bad,
         pump_end_hz: last_pump,
         rate_dps_est: est.rate_dps(),
+        health_end,
     })
 }
 
@@ -233,7 +247,22 @@ pub struct Expect {
     pub max_bad_ticks: u32,
     /// The rate estimate at the end within [`RATE_TOL_FRAC`] of the truth.
     pub rate: bool,
+    /// The drive falls out of its band: the drive's amplitude must fall below
+    /// [`DRIVE_LOST_RATIO`] of its start, the core must flag it (`drive_locked` cleared at
+    /// the end, in the loop and in the host-only loop), no retune, no guard clamp, and the
+    /// pump at the end within [`PUMP_FIL_VS_HOST_HZ`] of the host-only loop's (the rate
+    /// is not compared: without a drive there is none).
+    pub out_of_band: bool,
 }
+
+/// The drive is lost when its amplitude at the end is below this fraction of its
+/// amplitude before the drift.
+pub const DRIVE_LOST_RATIO: f64 = 0.5;
+/// `Health::bits` bit of `drive_locked`.
+pub const DRIVE_LOCKED_BIT: u32 = 1 << 4;
+/// The pump at the end, loop against host-only: four pump words (0.93 Hz), the DDS's
+/// quantisation plus the `f32` commands' differences.
+pub const PUMP_FIL_VS_HOST_HZ: f64 = 0.94;
 
 /// The summary of a session against the host-only loop.
 pub fn summarize(
@@ -254,6 +283,8 @@ pub fn summarize(
     let converged = (wy2_est - wy2_true).abs() <= wy2_tol;
     let amp: Vec<(f64, f64)> = s.rows.iter().map(|r| (r.t_s, r.sense_amp_um)).collect();
     let ratio = sense_amp_ratio(sc, &amp);
+    let damp: Vec<(f64, f64)> = s.rows.iter().map(|r| (r.t_s, r.drive_amp_um)).collect();
+    let drive_ratio = sense_amp_ratio(sc, &damp);
     let bad = s
         .rows
         .iter()
@@ -344,8 +375,9 @@ pub fn summarize(
         );
     }
     let tol = RATE_FIL_VS_HOST_FRAC * rate_true.abs();
+    // without a drive there is no rate to compare (out of band)
     check(
-        (rate_est - host.rate_dps_est).abs() <= tol,
+        expect.out_of_band || (rate_est - host.rate_dps_est).abs() <= tol,
         format!(
             "rate {rate_est:.4} °/s vs host-only {:.4} (tolerance {tol:.3})",
             host.rate_dps_est
@@ -403,6 +435,7 @@ pub fn summarize(
         converged,
         retunes: c[9],
         sense_amp_ratio: ratio,
+        drive_amp_ratio: drive_ratio,
         ticks: s.rows.len() as u32,
         bad_ticks: bad,
         instr_mean,
@@ -433,6 +466,7 @@ pub fn summarize(
         adc_fault_ticks,
         rate_dps_est: rate_est,
         rate_dps_true: rate_true,
+        health_end: s.rows.last().map_or(0, |r| r.fw.health),
         exit_code: s.exit_code,
         host_only: host,
         wy2_fil_vs_host: vs_host,
