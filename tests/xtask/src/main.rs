@@ -13,7 +13,10 @@
 //! * `cargo xtask setup` — only install.
 //!
 //! `qemu-system-arm` comes from Debian's packages (`apt-get`, as root: CI and these
-//! machines run as root); elsewhere the message says what to install by hand.
+//! machines run as root); elsewhere the message says what to install by hand. The
+//! firmware-in-the-loop test (tests/tests/fil.rs) needs QEMU too, and a C compiler (`cc`)
+//! for its instruction-count plugin: Rust's host linking needs `cc` anyway, so it is only
+//! checked (and installed with `gcc` from Debian's packages if missing, as root).
 #![forbid(unsafe_code)]
 
 use std::env;
@@ -97,6 +100,20 @@ fn setup() -> Result<(), String> {
                     PARAGYRO_SKIP_QEMU=1 to skip the firmware-in-QEMU test"
                 .into(),
         );
+    }
+
+    if found("cc") {
+        say("cc: installed (QEMU plugin of the firmware-in-the-loop test)");
+    } else if is_root() && found("apt-get") {
+        say("cc: installing it (apt-get install gcc)");
+        run("apt-get", &["update", "-qq"])?;
+        run_env(
+            "apt-get",
+            &["install", "-y", "-qq", "--no-install-recommends", "gcc"],
+            &[("DEBIAN_FRONTEND", "noninteractive")],
+        )?;
+    } else {
+        return Err("a C compiler (`cc`) is missing: install gcc".into());
     }
 
     if found("defmt-print") {
