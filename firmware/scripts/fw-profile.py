@@ -2,12 +2,18 @@
 """Per-tick instruction split from two insnprof histograms (see firmware/scripts/fw-profile.sh).
 
 Usage: fw-profile.py N DIR   (DIR holds nm-0.txt, nm-N.txt, prof-0.txt, prof-N.txt)
+       fw-profile.py --loop N DIR   (DIR holds nm-fil.txt and tickhist.txt of a firmware-in-the-loop
+       session of N ticks: only the ticks' instructions, the fake chips excluded; see
+       firmware/scripts/fil-profile.sh)
 Instructions are attributed to the function whose code they are (self counts: an inlined
 callee counts in its caller; a called soft-float routine counts as soft-float, not in the
 caller)."""
 import bisect, re, sys
 from collections import defaultdict
 
+LOOP = sys.argv[1] == "--loop"
+if LOOP:
+    sys.argv.pop(1)
 N, D = int(sys.argv[1]), sys.argv[2]
 GROUPS = [
     ("replay devices (QEMU only: the fake chips' SPI)", [r"^paragyro_firmware::replay", r"<paragyro_firmware::replay", r"paragyro_firmware\.\.replay", r"Frame::encode"]),
@@ -22,7 +28,8 @@ GROUPS = [
     ("libm", [r"^libm::"]),
     ("memcpy/memset", [r"compiler_builtins::mem", r"^__aeabi_mem", r"^mem(cpy|set|move)"]),
     ("integer builtins", [r"compiler_builtins::int", r"^__aeabi_(u?l|u?i)div"]),
-    ("board loop (qemu main)", [r"board::"]),
+    ("fil shims' remainder and markers (loop only)", [r"paragyro_firmware::fil", r"paragyro_firmware\.\.fil"]),
+    ("board main (the replay loop; in the loop: App::tick inlined)", [r"board::"]),
 ]
 
 def group(name):
@@ -34,7 +41,7 @@ def group(name):
 def strip(name):
     return re.sub(r"::h[0-9a-f]{16}$", "", name)
 
-def load(n):
+def load(n, prof=None):
     syms = []
     for line in open(f"{D}/nm-{n}.txt"):
         p = line.split(None, 3)
@@ -46,7 +53,7 @@ def load(n):
     starts = [s[0] for s in syms]
     counts = defaultdict(int)
     total = None
-    for line in open(f"{D}/prof-{n}.txt"):
+    for line in open(prof or f"{D}/prof-{n}.txt"):
         if line.startswith("#"):
             total = int(line.split()[2])
             continue
@@ -57,12 +64,18 @@ def load(n):
         counts[name] += c
     return counts, total
 
-c0, t0 = load(0)
-c1, t1 = load(N)
-diff = {k: c1.get(k, 0) - c0.get(k, 0) for k in set(c0) | set(c1)}
-per = {k: v / N for k, v in diff.items() if v}
-tot = sum(per.values())
-print(f"instructions per tick (mean over {N} ticks, exact: {N}-tick run {t1} - set-up-only run {t0}) = {(t1 - t0) / N:.0f}")
+if LOOP:
+    c1, _ = load("fil", f"{D}/tickhist.txt")
+    per = {k: v / N for k, v in c1.items() if v}
+    tot = sum(per.values())
+    print(f"instructions per tick in the loop (mean over {N} ticks, exact, fake chips excluded) = {tot:.0f}")
+else:
+    c0, t0 = load(0)
+    c1, t1 = load(N)
+    diff = {k: c1.get(k, 0) - c0.get(k, 0) for k in set(c0) | set(c1)}
+    per = {k: v / N for k, v in diff.items() if v}
+    tot = sum(per.values())
+    print(f"instructions per tick (mean over {N} ticks, exact: {N}-tick run {t1} - set-up-only run {t0}) = {(t1 - t0) / N:.0f}")
 by = defaultdict(float)
 for k, v in per.items():
     by[group(k)] += v

@@ -3,7 +3,11 @@
    next tick_end marker, the instructions of every translation block executed outside
    fake_enter .. fake_exit (the shims of paragyro_firmware::fil; the four markers' own
    blocks are not counted). Writes one decimal count per tick to out=PATH at exit.
-   Arguments: begin=ADDR,end=ADDR,fin=ADDR,fout=ADDR (hex, Thumb bit cleared),out=PATH.
+   Arguments: begin=ADDR,end=ADDR,fin=ADDR,fout=ADDR (hex, Thumb bit cleared),out=PATH,
+   and optionally hist=PATH: the counted instructions by translation block, as
+   "address count" lines (a block's instructions at its start address; a block never spans
+   two functions), for firmware/scripts/fil-profile.sh's split per stage; with only=K the
+   histogram holds tick K (0-based) alone.
    Build: cc -shared -fPIC -O2 -o libtickcount.so tickcount.c
    Same hand-declared v1 API as insnprof.c (Debian's QEMU ships no qemu-plugin.h). */
 #include <stdint.h>
@@ -31,13 +35,17 @@ static uint64_t *ticks;
 static size_t n_ticks, cap_ticks;
 static char out_path[512] = "tickcount.txt";
 
-/* udata: the block's instruction count in the low 32 bits, its kind in the high bits */
 enum { K_PLAIN = 0, K_BEGIN = 1, K_END = 2, K_FIN = 3, K_FOUT = 4 };
+/* one per translated block (a block translated twice gets two; summed by address) */
+struct block { uint64_t pc, n, kind, counted; struct block *next; };
+static struct block *blocks;
+static char hist_path[512];
+static long long hist_only = -1; /* only=K: the histogram of tick K alone */
 
 static void tb_exec(unsigned int vcpu, void *udata) {
-    uint64_t u = (uint64_t)(uintptr_t)udata;
-    uint64_t n = u & 0xffffffffu;
-    switch (u >> 32) {
+    struct block *b = udata;
+    uint64_t n = b->n;
+    switch (b->kind) {
     case K_BEGIN: in_tick = 1; in_fake = 0; count = 0; return;
     case K_END:
         if (in_tick) {
@@ -53,7 +61,10 @@ static void tb_exec(unsigned int vcpu, void *udata) {
     case K_FIN: in_fake = 1; return;
     case K_FOUT: in_fake = 0; return;
     default:
-        if (in_tick && !in_fake) count += n;
+        if (in_tick && !in_fake) {
+            count += n;
+            if (hist_only < 0 || (long long)n_ticks == hist_only) b->counted += n;
+        }
     }
 }
 
@@ -62,8 +73,10 @@ static void tb_trans(qemu_plugin_id_t id, struct qemu_plugin_tb *tb) {
     uint64_t n = qemu_plugin_tb_n_insns(tb);
     uint64_t k = pc == a_begin ? K_BEGIN : pc == a_end ? K_END : pc == a_fin ? K_FIN
                : pc == a_fout ? K_FOUT : K_PLAIN;
-    qemu_plugin_register_vcpu_tb_exec_cb(tb, tb_exec, QEMU_PLUGIN_CB_NO_REGS,
-                                         (void *)(uintptr_t)((k << 32) | n));
+    struct block *b = calloc(1, sizeof *b);
+    if (!b) { qemu_plugin_outs("tickcount: out of memory\n"); exit(3); }
+    b->pc = pc; b->n = n; b->kind = k; b->next = blocks; blocks = b;
+    qemu_plugin_register_vcpu_tb_exec_cb(tb, tb_exec, QEMU_PLUGIN_CB_NO_REGS, b);
 }
 
 static void at_exit(qemu_plugin_id_t id, void *p) {
@@ -72,6 +85,14 @@ static void at_exit(qemu_plugin_id_t id, void *p) {
     if (!f) { qemu_plugin_outs("tickcount: cannot open the output file\n"); return; }
     for (size_t i = 0; i < n_ticks; i++) fprintf(f, "%llu\n", (unsigned long long)ticks[i]);
     fclose(f);
+    if (hist_path[0]) {
+        FILE *h = fopen(hist_path, "w");
+        if (h) {
+            for (struct block *b = blocks; b; b = b->next)
+                if (b->counted) fprintf(h, "%llx %llu\n", (unsigned long long)b->pc, (unsigned long long)b->counted);
+            fclose(h);
+        }
+    }
     snprintf(buf, sizeof buf, "tickcount: %zu ticks written to %s\n", n_ticks, out_path);
     qemu_plugin_outs(buf);
 }
@@ -85,6 +106,8 @@ int qemu_plugin_install(qemu_plugin_id_t id, const qemu_info_t *info, int argc, 
         else if (!strncmp(a, "end=", 4)) a_end = strtoull(a + 4, NULL, 16);
         else if (!strncmp(a, "fin=", 4)) a_fin = strtoull(a + 4, NULL, 16);
         else if (!strncmp(a, "fout=", 5)) a_fout = strtoull(a + 5, NULL, 16);
+        else if (!strncmp(a, "hist=", 5)) snprintf(hist_path, sizeof hist_path, "%s", a + 5);
+        else if (!strncmp(a, "only=", 5)) hist_only = strtoll(a + 5, NULL, 10);
     }
     if (!a_begin || !a_end || !a_fin || !a_fout) {
         qemu_plugin_outs("tickcount: begin=, end=, fin=, fout= are required\n");

@@ -222,10 +222,16 @@ fn start_qemu(opts: &Options, markers: [u32; 4]) -> anyhow::Result<Qemu> {
     mkfifo(&to_path)?;
     mkfifo(&from_path)?;
     let [b, e, fi, fo] = markers;
+    // PARAGYRO_FIL_HIST_TICK=K: the histogram of tick K alone (fil-profile.sh)
+    let only = std::env::var("PARAGYRO_FIL_HIST_TICK")
+        .ok()
+        .and_then(|k| k.parse::<u64>().ok())
+        .map_or(String::new(), |k| format!(",only={k}"));
     let plugin = format!(
-        "{},begin={b:x},end={e:x},fin={fi:x},fout={fo:x},out={}",
+        "{}{only},begin={b:x},end={e:x},fin={fi:x},fout={fo:x},out={},hist={}",
         plugin_so.display(),
-        dir.join("tickcount.txt").display()
+        dir.join("tickcount.txt").display(),
+        dir.join("tickhist.txt").display()
     );
     let child = Command::new("qemu-system-arm")
         .current_dir(&run)
