@@ -275,6 +275,9 @@ pub struct FwCounters {
     pub accel_errors: u32,
     /// Accelerometer samples with X or Y at the end of the code range.
     pub accel_saturated: u32,
+    /// Accelerometer samples refused as stuck: X and Y codes identical for
+    /// [`App::set_accel_stuck_limit`] reads in a row (0: never, the default).
+    pub accel_stuck: u32,
     /// Ticks whose DDS writes failed (the pump in effect was kept).
     pub dds_errors: u32,
     /// Pump commands refused by the guard: clamped to the window, or not finite.
@@ -289,7 +292,7 @@ pub mod fault {
     pub const ADC_X: u8 = 1;
     /// The sense-axis ADC frame was lost (channels NaN).
     pub const ADC_Y: u8 = 2;
-    /// The accelerometer read failed (acceleration NaN).
+    /// The accelerometer read failed, or its codes are stuck (acceleration NaN).
     pub const ACCEL: u8 = 4;
     /// A lock-in or accelerometer code was at full scale.
     pub const SATURATED: u8 = 8;
@@ -350,6 +353,35 @@ pub struct App<AX, AY, XL, DDS> {
     counters: FwCounters,
     /// The sample given to the core at the last tick (for the capture mode).
     last: Sample<f32>,
+    /// The stuck-accelerometer test ([`App::set_accel_stuck_limit`]).
+    accel_stuck: StuckAccel,
+}
+
+/// A stuck ADXL355: the same X and Y codes `limit` reads in a row. A real device's noise
+/// (25 µg/√Hz: ≈ 18 codes rms at ±8 g and 500 Hz) makes that implausible; noise-free
+/// replayed data repeat legitimately, so the test is off (`limit` 0) unless the board
+/// enables it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct StuckAccel {
+    limit: u32,
+    last: (i32, i32),
+    repeats: u32,
+}
+
+impl StuckAccel {
+    /// Feeds one good read's codes; true while they count as stuck.
+    fn push(&mut self, xy: (i32, i32)) -> bool {
+        if self.limit == 0 {
+            return false;
+        }
+        if xy == self.last {
+            self.repeats = self.repeats.saturating_add(1);
+        } else {
+            self.last = xy;
+            self.repeats = 1;
+        }
+        self.repeats >= self.limit
+    }
 }
 
 /// A value beyond `full_scale` (twice it, or `f32::MAX` if that overflows).
@@ -439,8 +471,13 @@ fn read_accel<S: SpiDevice>(
     accel: &mut Adxl355<S>,
     beyond_mps2: f32,
     counters: &mut FwCounters,
+    stuck: &mut StuckAccel,
 ) -> ([f32; 2], u8) {
     match accel.read_sample() {
+        Ok(s) if stuck.push((s.raw.x, s.raw.y)) => {
+            bump(&mut counters.accel_stuck);
+            ([f32::NAN; 2], fault::ACCEL)
+        }
         Ok(s) => {
             let [ax, ay, _] = s.accel_mps2;
             let mut faults = 0;
@@ -532,6 +569,11 @@ where
                 pump_hz: f64::NAN,
                 pump_scale: f32::NAN,
             },
+            accel_stuck: StuckAccel {
+                limit: 0,
+                last: (0, 0),
+                repeats: 0,
+            },
         }
     }
 
@@ -569,6 +611,18 @@ where
             pump_scale: f32::NAN,
         };
         Ok(())
+    }
+
+    /// Refuses the accelerometer's sample (NaN acceleration, fault bit `ACCEL`, counted in
+    /// `accel_stuck`) once its X and Y codes have been identical for `reads` reads in a
+    /// row, until they change; 0 (the default, kept by [`App::configure`]) disables the
+    /// test. Boards with a real (noisy) accelerometer enable it; the replay's noise-free
+    /// accelerations would trip it.
+    pub fn set_accel_stuck_limit(&mut self, reads: u32) {
+        self.accel_stuck = StuckAccel {
+            limit: reads,
+            ..StuckAccel::default()
+        };
     }
 
     /// Changes the amplitude mapping (validated; field `"pump_amplitude"`). The next
@@ -644,6 +698,7 @@ where
             &mut self.chips.accel,
             self.accel_beyond_mps2,
             &mut self.counters,
+            &mut self.accel_stuck,
         );
         let mut faults = fx | fy | fa;
         let (pump_hz, pump_scale) =
@@ -818,6 +873,23 @@ mod tests {
     use super::*;
     use crate::FailingSpi;
     use crate::drivers::ad9959::DEFAULT_SYSCLK_HZ;
+
+    /// The stuck-accelerometer test: off at 0; with a limit, refused from the limit-th
+    /// identical read on, until the codes change.
+    #[test]
+    fn stuck_accelerometer_from_the_limit_th_identical_read() {
+        let mut off = StuckAccel::default();
+        assert!((0..100).all(|_| !off.push((5, 7))));
+        let mut s = StuckAccel {
+            limit: 3,
+            ..StuckAccel::default()
+        };
+        let seen: Vec<bool> = [(1, 2), (1, 2), (1, 2), (1, 2), (1, 3), (1, 3), (1, 3)]
+            .into_iter()
+            .map(|xy| s.push(xy))
+            .collect();
+        assert_eq!(seen, [false, false, true, true, false, false, true]);
+    }
 
     /// The tick path's integer guard plan picks the very word of `PumpGuard::plan`.
     #[test]

@@ -49,6 +49,9 @@ use crate::table::{CFG_SLOTS, config_from_slots, control};
 pub const ACCEL_BURST: usize = 13;
 /// Capacity of the DDS byte log of one exchange.
 pub const DDS_LOG_BYTES: usize = 192;
+/// Identical ADXL355 X and Y codes in a row that the `fil` board refuses as stuck (the
+/// host's accelerometer carries the ADXL355's noise).
+pub const ACCEL_STUCK_READS: u32 = 8;
 /// Control events one tick can carry.
 pub const MAX_TICK_CONTROLS: usize = 2;
 /// First bytes of an [`Init`].
@@ -58,7 +61,7 @@ pub const INIT_BYTES: usize = 4 + 8 * CFG_SLOTS + 4 + 4 + 4 + 4 + 8 + 4 + 4;
 /// Length of an encoded [`ToFw`].
 pub const TO_FW_BYTES: usize = 4 + 1 + 1 + 12 * MAX_TICK_CONTROLS + 2 * FRAME_BYTES + ACCEL_BURST;
 /// Length of an encoded [`FromFw`].
-pub const FROM_FW_BYTES: usize = 4 + 8 + 4 + 5 * 8 + 14 * 4 + 2 + DDS_LOG_BYTES;
+pub const FROM_FW_BYTES: usize = 4 + 8 + 4 + 5 * 8 + (COUNTERS + 3) * 4 + 2 + DDS_LOG_BYTES;
 /// [`FromFw::tick`] of the set-up answer.
 pub const TICK_SETUP: u32 = u32::MAX;
 /// [`FromFw::tick`] of the answer to the end message.
@@ -266,7 +269,7 @@ impl ToFw {
 }
 
 /// The firmware's counters the host reports (firmware and core).
-pub const COUNTERS: usize = 11;
+pub const COUNTERS: usize = 12;
 
 /// One tick's outcome, board → host.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -296,7 +299,8 @@ pub struct FromFw {
     /// Rate estimate, °/s.
     pub rate_dps: f64,
     /// Firmware counters (ADC SPI, CRC, not ready, saturated; accel errors, saturated;
-    /// DDS errors, guard clamps), DRDY missing, core retunes, core bad samples.
+    /// DDS errors, guard clamps), DRDY missing, core retunes, core bad samples, accelerometer
+    /// samples refused as stuck.
     pub counters: [u32; COUNTERS],
     /// SysTick instructions (±6) from the tick's start to the IO_UPDATE pulse (0: none).
     pub pulse_at_insns: u32,

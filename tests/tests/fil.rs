@@ -130,13 +130,19 @@ fn spi_faults_are_flagged_counted_and_survived() {
     let s = run(&ls, PumpProfile::Staircase);
     assert_pass(&s);
     let c = &s.fw_counters;
-    // five CRC errors, one missing DRDY (both frames not ready), ten failed DDS ticks
+    // five CRC errors, one missing DRDY (both frames not ready), ten failed DDS ticks,
+    // the accelerometer stuck for 50 ticks: refused from the 8th identical read (43)
     assert_eq!(c.adc_crc_errors, 5);
     assert_eq!((c.drdy_missing, c.adc_not_ready), (1, 2));
     assert_eq!((c.dds_errors, s.dds_fault_ticks), (10, 10));
     assert_eq!(s.adc_fault_ticks, 6);
-    assert_eq!(s.bad_ticks, 6, "exactly the CRC and DRDY ticks are flagged");
-    assert_eq!(c.core_bad_samples, 6);
+    assert_eq!((c.accel_stuck, c.accel_errors), (43, 0));
+    assert_eq!(
+        s.bad_ticks,
+        5 + 1 + 43,
+        "exactly the CRC, DRDY and stuck ticks are flagged"
+    );
+    assert_eq!(c.core_bad_samples, 49);
     assert_eq!((c.adc_spi_errors, c.guard_clamps), (0, 0));
     // survived: converged and retuned as without faults
     assert!(s.converged && s.retunes >= 1 && s.sense_amp_ratio >= 1.0);

@@ -200,6 +200,7 @@ fn configure(app: &mut FilApp<'_>, init: &Init, io: &mut FilIo<'_>) -> bool {
         defmt::error!("fil: amplitude mapping rejected");
         return false;
     }
+    app.set_accel_stuck_limit(fil::ACCEL_STUCK_READS);
     if let Err(e) = app.start(io) {
         defmt::error!("fil: starting the pump failed: {}", defmt::Debug2Format(&e));
         return false;
@@ -222,6 +223,7 @@ fn report(app: &FilApp<'_>, drdy_missing: u32, out: &mut FromFw) {
         drdy_missing,
         c.retunes,
         c.bad_samples,
+        f.accel_stuck,
     ];
     out.wy2 = app.estimator().wy2();
     out.rate_dps = app.estimator().rate_dps();

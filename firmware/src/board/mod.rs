@@ -44,18 +44,20 @@ where
         | f.adc_saturated
         | f.accel_errors
         | f.accel_saturated
+        | f.accel_stuck
         | f.dds_errors
         | f.guard_clamps
         != 0
     {
         defmt::warn!(
-            "faults: adc spi {} crc {} not-ready {} saturated {}, accel {} saturated {}, dds {}, guard {}",
+            "faults: adc spi {} crc {} not-ready {} saturated {}, accel {} saturated {} stuck {}, dds {}, guard {}",
             f.adc_spi_errors,
             f.adc_crc_errors,
             f.adc_not_ready,
             f.adc_saturated,
             f.accel_errors,
             f.accel_saturated,
+            f.accel_stuck,
             f.dds_errors,
             f.guard_clamps
         );

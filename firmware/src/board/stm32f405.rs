@@ -205,6 +205,8 @@ fn main() -> ! {
         fail("configuration rejected")
     }
     let app = &mut app;
+    // a real ADXL355 is noisy: 8 identical X and Y codes in a row mean a stuck device
+    app.set_accel_stuck_limit(paragyro_firmware::fil::ACCEL_STUCK_READS);
     if app
         .set_pump_amplitude(PumpAmplitude {
             base_scale: 1.0,

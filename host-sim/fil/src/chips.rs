@@ -16,6 +16,9 @@ pub const STATUS_READY: u16 = 0x01FF;
 pub const STATUS_NOT_READY: u16 = 0x0100;
 /// ADXL355 STATUS with DATA_RDY.
 const XL_DATA_RDY: u8 = 0x01;
+/// The ADXL355's noise at ODR 500 Hz (bandwidth 125 Hz): 25 µg/√Hz · √125 Hz, m/s² rms
+/// (≈ 18 codes at ±8 g).
+pub const ACCEL_NOISE_MPS2: f64 = 25e-6 * 9.806_65 * 11.180_339_887;
 
 /// Faults of a run, by tick (half-open spans; default none).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -38,17 +41,20 @@ pub struct SensorChips {
     range: Range,
     faults: Faults,
     held_accel: Option<[u8; ACCEL_BURST]>,
+    rng: rand_xoshiro::Xoshiro256PlusPlus,
 }
 
 impl SensorChips {
     /// Lock-in channels encoded at `um_per_volt` (drive, sense; PGA gain 1), the
-    /// accelerometer at `range`.
-    pub fn new(um_per_volt: [f32; 2], range: Range, faults: Faults) -> Self {
+    /// accelerometer at `range` with its noise ([`ACCEL_NOISE_MPS2`], seeded by `seed`).
+    pub fn new(um_per_volt: [f32; 2], range: Range, faults: Faults, seed: u64) -> Self {
+        use rand::SeedableRng;
         Self {
             cal: um_per_volt.map(calibration),
             range,
             faults,
             held_accel: None,
+            rng: rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xADC1_355A),
         }
     }
 
@@ -82,14 +88,18 @@ impl SensorChips {
         !self.faults.no_drdy.contains(k)
     }
 
-    /// The STATUS..ZDATA1 burst of tick `k` for X, Y in m/s² (Z: 1 g).
+    /// The STATUS..ZDATA1 burst of tick `k` for X, Y in m/s² (Z: 1 g), with the device's
+    /// noise.
     pub fn accel_burst(&mut self, k: usize, ax: f64, ay: f64) -> [u8; ACCEL_BURST] {
+        use rand_distr::{Distribution, Normal};
+        let noise = Normal::new(0.0, ACCEL_NOISE_MPS2).expect("a finite, positive σ");
         let mut b = [0u8; ACCEL_BURST];
         b[0] = XL_DATA_RDY;
-        for (i, a) in [ax as f32, ay as f32, STANDARD_GRAVITY_MPS2]
+        for (i, a) in [ax, ay, f64::from(STANDARD_GRAVITY_MPS2)]
             .into_iter()
             .enumerate()
         {
+            let a = (a + noise.sample(&mut self.rng)) as f32;
             b[4 + 3 * i..7 + 3 * i].copy_from_slice(&accel_bytes(encode_accel(a, self.range)));
         }
         if self.faults.stuck_accel.contains(k) {
@@ -183,7 +193,7 @@ mod tests {
             no_drdy: Span::at(5),
             ..Faults::default()
         };
-        let chips = SensorChips::new([8.0, 4.0], Range::G8, faults);
+        let chips = SensorChips::new([8.0, 4.0], Range::G8, faults, 1);
         let ch = channels();
         let [x, y] = chips.adc_frames(0, &ch);
         for (axis, bytes) in [x, y].iter().enumerate() {
@@ -218,13 +228,19 @@ mod tests {
             stuck_accel: Span::new(2, 4),
             ..Faults::default()
         };
-        let mut chips = SensorChips::new([8.0, 4.0], Range::G8, faults);
+        let mut chips = SensorChips::new([8.0, 4.0], Range::G8, faults, 1);
         let b = chips.accel_burst(0, 39.2266, -12.0);
         assert_eq!(b[0] & 1, 1);
         let lsb = f64::from(Range::G8.mps2_per_lsb());
         let x = f64::from(raw20_from_bytes([b[4], b[5], b[6]])) * lsb;
         let y = f64::from(raw20_from_bytes([b[7], b[8], b[9]])) * lsb;
-        assert!((x - 39.2266).abs() <= lsb && (y + 12.0).abs() <= lsb);
+        let tol = 5.0 * ACCEL_NOISE_MPS2 + lsb;
+        assert!((x - 39.2266).abs() <= tol && (y + 12.0).abs() <= tol);
+        // noisy: two reads of the same acceleration differ
+        assert_ne!(
+            chips.accel_burst(1, 39.2266, -12.0),
+            chips.accel_burst(1, 39.2266, -12.0)
+        );
         let held = chips.accel_burst(2, 1.0, 1.0);
         assert_eq!(chips.accel_burst(3, 5.0, 5.0), held);
         assert_ne!(chips.accel_burst(4, 5.0, 5.0), held);

@@ -77,6 +77,8 @@ pub struct FwCounts {
     pub drdy_missing: u32,
     /// The core's bad samples.
     pub core_bad_samples: u32,
+    /// Accelerometer samples the firmware refused as stuck.
+    pub accel_stuck: u32,
 }
 
 /// `target/fil/summary.json`.
@@ -424,6 +426,16 @@ pub fn summarize(
             c[6]
         ),
     );
+    // a stuck accelerometer is refused from its ACCEL_STUCK_READS-th identical read on
+    let stuck = span_len(faults.stuck_accel)
+        .saturating_sub(paragyro_firmware::fil::ACCEL_STUCK_READS.saturating_sub(1));
+    check(
+        c[11] == stuck && c[4] == 0,
+        format!(
+            "{} stuck accelerometer samples counted, {stuck} expected",
+            c[11]
+        ),
+    );
     check(
         adc_fault_ticks == span_len(faults.crc) + span_len(faults.no_drdy),
         format!("{adc_fault_ticks} ticks with a lost ADC frame"),
@@ -461,6 +473,7 @@ pub fn summarize(
             guard_clamps: c[7],
             drdy_missing: c[8],
             core_bad_samples: c[10],
+            accel_stuck: c[11],
         },
         dds_fault_ticks,
         adc_fault_ticks,
