@@ -302,7 +302,9 @@ pub struct FromFw {
     /// DDS errors, guard clamps), DRDY missing, core retunes, core bad samples, accelerometer
     /// samples refused as stuck.
     pub counters: [u32; COUNTERS],
-    /// SysTick instructions (±6) from the tick's start to the IO_UPDATE pulse (0: none).
+    /// When the tick pulsed IO_UPDATE (its last action, `App::tick` step 5): SysTick
+    /// instructions (±6) from the tick's start to its end, shims included, i.e. when the
+    /// new words take effect after DRDY; 0 when it did not pulse.
     pub pulse_at_insns: u32,
     /// SysTick instructions (±6) of the whole tick, shims included.
     pub tick_insns: u32,

@@ -276,7 +276,6 @@ pub fn summarize(
     expect: Expect,
     faults: &Faults,
 ) -> Summary {
-    let last = s.rows.last().map(|r| r.fw);
     let end = &s.end;
     let c = end.counters;
     let wy2_est = end.wy2;
@@ -366,7 +365,6 @@ pub fn summarize(
             "the host-only loop did not retune".into(),
         );
     }
-    let _ = last;
     let rate_est = end.rate_dps;
     let rate_true = s.rows.last().map_or(f64::NAN, |r| r.rate_dps_true);
     if expect.rate {
