@@ -57,12 +57,17 @@
 //! amplitude dither has the same lag). That is the kind of error the replica exists to
 //! remove (an uncompensated 2 ms lock-in delay makes row errors about ten times the
 //! Coriolis term); scaled linearly, a 0.75 ms mismatch would give a bias of a few
-//! Coriolis terms in the dither-identified θ. It has not been measured: the host
-//! simulator should model the DDS as a staircase to quantify it. Two remedies, both
-//! future work:
+//! Coriolis terms in the dither-identified θ. **Measured in the loop** (firmware/README.md,
+//! "Firmware in the loop"): on this stepping DDS a core told `Linear` never retunes
+//! (`drift-retune`: sense amplitude ratio 0.571), told `Staircase` (ZOH replica) it
+//! retunes (1.1865); the stm32f405 and `fil` boards therefore configure `Staircase`. The
+//! lag of the pulse within the interval is not modelled there. Two remedies for the
+//! remaining ZOH bias, both future work:
 //! * the AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, rising/falling
-//!   delta words and ramp rate, started by a profile pin at the sample instant) makes the
-//!   realised pump the linear sweep the replica assumes, up to the sweep's own steps;
+//!   delta words and ramp rate, started by a profile pin at the sample instant) would make
+//!   the realised pump a linear sweep, but its 8-bit ramp rate (≤ 2.04 µs per step) and
+//!   0.116 Hz delta resolution make its slowest sweep ≈ 57 kHz/s, far above the core's
+//!   ≈ 680 Hz/s: it would reach each word within ≈ 25 µs and hold (a staircase again);
 //! * cheaper: pulse IO_UPDATE from a timer at DRDY + T/2 (an [`IoUpdate`] implementation
 //!   may arm such a timer instead of toggling a pin): the staircase is then centred on the
 //!   sample instants and agrees with the linear sweep to second order (no lag; a
