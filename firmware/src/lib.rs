@@ -4,6 +4,9 @@
 //! not depend on the target: the SPI drivers of the board's chips ([`drivers`]), written
 //! against embedded-hal 1.0 only, so `cargo test -p paragyro-firmware` checks them on the
 //! host transaction by transaction. `no_std`, no allocation, no `unsafe`, no panics.
+//! Also the application tick ([`app`]), the replay devices and run of the QEMU board
+//! ([`replay`], [`run`], [`table`]) and the firmware-in-the-loop exchange and shims
+//! ([`fil`]).
 //!
 //! The optional `defmt` feature derives `defmt::Format` for the driver types; enable it
 //! only for target builds (a host test binary would not link, TOOLCHAIN.md §7).

@@ -9,9 +9,12 @@
 //!   capture of what the firmware writes to the DDS. The real drivers and
 //!   [`paragyro_firmware::app::App::tick`] run on top; the run exits through semihosting
 //!   with 0 only if the estimate converged and the retune happened ([`board::qemu`]).
+//! * `fil`: QEMU's `netduinoplus2` in the loop with the host process `paragyro-fil`,
+//!   which plays the chips every tick from the simulated plant over semihosting pipes
+//!   (`cargo fw-loop`; [`paragyro_firmware::fil`], `board::fil`).
 //! * `stm32f405`: the real board (SPI1: the two ADS131M08s, SPI2: the ADXL355, SPI3:
-//!   the AD9959, DRDY on PB0) through `stm32f4xx-hal`; defmt over RTT, flashed and run
-//!   with `probe-rs run --chip STM32F405RGTx` ([`board::stm32f405`]).
+//!   the AD9959, DRDY on PB0) through `stm32f4xx-hal`; defmt over RTT, linked with
+//!   flip-link, flashed and run with probe-rs (`cargo fw-stm32-run`; [`board::stm32f405`]).
 //!
 //! On the host this builds a stub (the library is what the host tests use).
 #![cfg_attr(target_os = "none", no_std)]
