@@ -1,5 +1,5 @@
 //! A device that is not the model, diagnosed: `cargo run --release -p paragyro-diagnose
-//! --example calibrate -- [wy2=1.0275] [mu=1.05e-3] [effect=NAME=SIZE[@P]] [seed=N] [noise=PM]`
+//! --example calibrate -- [wy2=1.0275] [mu=1.05e-3] [effect=NAME=SIZE[@P]] [seed=N] [noise=PM] [tol=SEED]`
 //! prints the parameter face, the verdict and the residual against the record's noise.
 
 use paragyro_diagnose::diagnose::calibrate::describe;
@@ -26,6 +26,13 @@ fn main() -> anyhow::Result<()> {
                 sc.plant.mu_x = v.parse()?;
                 sc.plant.mu_y = v.parse()?;
             }
+            "tol" => {
+                use rand::SeedableRng;
+                let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(v.parse()?);
+                let dev = paragyro_diagnose::blind::device::DeviceDraw::draw(&mut rng);
+                println!("device: {dev:?}");
+                sc = dev.apply(&sc);
+            }
             "seed" => opts.seed = Some(v.parse()?),
             "noise" => sc.sim.noise_pm_rthz = v.parse()?,
             "effect" => opts.effects.push(v.parse().map_err(anyhow::Error::msg)?),
@@ -33,7 +40,25 @@ fn main() -> anyhow::Result<()> {
         }
     }
     let (rec, _) = simulate_record_with(&sc, &opts, &mut |_| {})?;
-    let d = diagnose(&rec, &Options::default())?;
+    if std::env::var("CMP").is_ok() {
+        let o2 = RecordOptions {
+            effects: Vec::new(),
+            ..opts.clone()
+        };
+        let (r2, _) = simulate_record_with(&sc, &o2, &mut |_| {})?;
+        let mut m = 0.0f64;
+        for (a, b) in rec.rows.iter().zip(&r2.rows) {
+            m = m.max((a.lockin.y_um[0].re - b.lockin.y_um[0].re).abs());
+        }
+        println!("max |Δ y1.re| with/without the effects: {m:.3e} µm");
+    }
+    let d = diagnose(
+        &rec,
+        &Options {
+            resimulate: std::env::var("NORESIM").is_err(),
+            ..Options::default()
+        },
+    )?;
     let r = &d.report;
     for p in &r.parameter_face.parameters {
         println!(
@@ -48,20 +73,29 @@ fn main() -> anyhow::Result<()> {
         println!("[{}] {}: {}", h.status, h.name, h.detail);
     }
     println!(
-        "noise ratio {:.3}, residual/noise {:.3}, gap fraction {:.4}, verdict {} (closest {}), {:.2} s",
+        "noise ratio {:.3}, residual/noise {:.3}, gap fraction {:.4}, unexplained {:.3} {:?}, verdict {} (closest {}), {:.2} s",
         r.parameter_face.noise_energy_ratio,
         r.residual_over_noise,
         r.gap_fraction_of_baseline,
+        r.unexplained_above_noise,
+        r.unexplained_rows,
         r.verdict,
         r.closest_library_effect,
         r.seconds
     );
-    for c in r.ranking.iter().take(3) {
+    for c in r
+        .ranking
+        .iter()
+        .take(if std::env::var("ALL").is_ok() { 20 } else { 3 })
+    {
         println!(
             "  {} {:?} ± {:?} closure {:.3} sig {}",
             c.effect, c.size, c.size_sigma, c.gap_closure, c.significant
         );
     }
-    println!("{:?}", r.timing_s);
+    println!(
+        "beat {:.3} Hz; {:?}",
+        r.vibration_beat_scan.best_hz, r.timing_s
+    );
     Ok(())
 }

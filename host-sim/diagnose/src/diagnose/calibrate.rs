@@ -117,6 +117,26 @@ pub(crate) struct ThetaFit {
     pub cov: Vec<f64>,
 }
 
+impl ThetaFit {
+    /// The refinement `fit` plus the θ part of a fit whose first 14 columns are the θ (the
+    /// baseline) and the rest an effect's: `Δθ` and its covariance with the effect fitted
+    /// jointly.
+    pub(crate) fn joint(fit: &ThetaFit, f: &super::lsq::Fit) -> ThetaFit {
+        let p = f.beta.len();
+        let mut dtheta = fit.dtheta;
+        for (d, b) in dtheta.iter_mut().zip(&f.beta) {
+            *d += b;
+        }
+        let mut cov = vec![0.0; 14 * 14];
+        for i in 0..14 {
+            for j in 0..14 {
+                cov[i * 14 + j] = f.cov[i * p + j];
+            }
+        }
+        ThetaFit { dtheta, cov }
+    }
+}
+
 /// Batch least squares of the 14 θ columns of the record's rows on the gap `rows.y`,
 /// over the fit span (cluster-robust covariance over its blocks).
 pub(crate) fn fit_theta(rows: &Rows, spans: &Spans) -> ThetaFit {
@@ -281,7 +301,11 @@ fn hypotheses(
         ps[I_WY2].device - ps[I_WY2].model,
         ps[I_ALPHA_Y].device - ps[I_ALPHA_Y].model,
     );
-    let (vw, va, cwa) = (cov(I_WY2, I_WY2), cov(I_ALPHA_Y, I_ALPHA_Y), cov(I_WY2, I_ALPHA_Y));
+    let (vw, va, cwa) = (
+        cov(I_WY2, I_WY2),
+        cov(I_ALPHA_Y, I_ALPHA_Y),
+        cov(I_WY2, I_ALPHA_Y),
+    );
     // κ from both (generalised least squares on the direction (1, c3))
     let det = vw * va - cwa * cwa;
     let (kappa, ksig, chi2) = if det > 0.0 {

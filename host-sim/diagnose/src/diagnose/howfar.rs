@@ -11,7 +11,7 @@ use super::columns::Columns;
 use super::resim::{OutputError, Resim, lockin_noise_diff_ratio, output_error};
 use super::rows::Rows;
 use super::verdict::Decision;
-use super::{Stage, Timing};
+use super::{Model, Stage, Timing};
 
 /// What the re-simulation with the verdict's effect(s) does to the output error
 /// (report.json's `output_error`).
@@ -82,10 +82,13 @@ fn verdict_specs(cols: &Columns, rows: &Rows, decision: &Decision) -> (Vec<Effec
     (specs, vib_phase)
 }
 
-/// Re-runs the simulator with the verdict's effect(s) on the held-out span.
+/// Re-runs the simulator with the verdict's effect(s) on the held-out span: the calibrated
+/// model with its θ refitted jointly with the effect (`model_after`; the calibration alone
+/// absorbed part of the effect), against the calibrated model alone.
 pub(crate) fn how_far(
     st: &Stage<'_>,
     decision: &Decision,
+    model_after: &Model,
     timing: &mut Timing,
 ) -> anyhow::Result<Far> {
     let Stage {
@@ -114,8 +117,8 @@ pub(crate) fn how_far(
     // the effect's run covers the held-out span (starting 0.5 s early from the record)
     let resim = Resim {
         rec,
-        model: &opts.model,
-        gamma: gamma_fit,
+        model: model_after,
+        gamma: gamma_fit.map(|_| model_after.phys.gamma),
         rate_ref: rows.rate_ref.as_deref(),
         effects: &specs,
         vib_phase0: vib_phase,

@@ -270,13 +270,18 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     } else {
         (rows0, spans0)
     };
+    let mut rows = rows;
     let fit1 = calibrate::fit_theta(&rows, &spans);
+    // the calibration's refinement is part of the model: the structural face starts from
+    // the gap it leaves
+    rows.remove_theta(&fit1.dtheta);
     let nu2 = match &rows.before_sim {
         Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1)?,
         None => 1.0,
     };
+    let cfg_model = opts.model.clone();
     let (face, _device) = calibrate::face(
-        &opts.model,
+        &cfg_model,
         &opts_cal.model,
         &rows,
         &fit1,
@@ -295,6 +300,29 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let ranking = rank::rank(&cols, &rows, &spans, &fits);
     // 4. the verdict
     let decision = verdict::decide(&cols, &rows, &spans, &fits, &ranking, &face);
+    // the parameter face with the verdict's effect(s) fitted jointly (an unmodelled force
+    // otherwise leaks into the θ)
+    let (face, joint_model) = if decision.verdict_cols.is_empty() {
+        (face, opts.model.clone())
+    } else {
+        let joint = calibrate::ThetaFit::joint(&fit1, &decision.after_fit);
+        let m = calibrate::calibrated_model(
+            &opts.model,
+            &rows,
+            &joint,
+            &format!("{} with the verdict's effect", opts.model.source),
+        );
+        let f = calibrate::face(
+            &cfg_model,
+            &opts.model,
+            &rows,
+            &joint,
+            face.noise_energy_ratio,
+            face.resimulations,
+        )
+        .0;
+        (f, m)
+    };
     let st = Stage {
         rec,
         opts,
@@ -306,7 +334,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     // 5. where the gap lies
     let place = locate::locate(&st, &decision);
     // 6. how far it closes once the verdict's effect is added
-    let far = howfar::how_far(&st, &decision, &mut timing)?;
+    let far = howfar::how_far(&st, &decision, &joint_model, &mut timing)?;
     let report = report::assemble(report::Parts {
         opts,
         rows: &rows,

@@ -20,8 +20,9 @@ use super::rank::Fits;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Verdict};
 use super::{
-    COHERENT, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_LABELS,
-    ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX, VIB_BEAT_MAX_HZ,
+    COHERENT, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options, ROW_GAP_MIN,
+    ROW_GAP_SHARE, ROW_LABELS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    VIB_BEAT_MAX_HZ,
 };
 
 /// The format tag of report.json.

@@ -168,7 +168,7 @@ fn channels(o: &LockinOut) -> [f64; 10] {
 
 /// Lock-in output noise of white displacement noise at 1 pm/√Hz (the simulator's lock-in
 /// at the record's settings, gyro at rest), per channel: the energy of the
-/// sample-to-sample differences per sample, µm².
+/// second sample-to-sample differences per sample, µm².
 fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
     let h = &rec.header;
     let omega0 = TAU * h.f0_hz;
@@ -192,19 +192,23 @@ fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
         ax: 0.0,
         ay: 0.0,
     };
-    let mut prev: Option<[f64; 10]> = None;
+    let mut prev: Option<([f64; 10], [f64; 10])> = None;
+    let mut last: Option<[f64; 10]> = None;
     let (mut dd, mut m) = ([0.0; 10], 0usize);
     for k in 0..4000 {
         sim.advance(&th, &u, &u);
         let o = channels(&sim.lockin());
         if k >= 20 {
-            if let Some(p) = &prev {
+            if let Some((p2, p1)) = &prev {
                 for c in 0..10 {
-                    dd[c] += (o[c] - p[c]).powi(2);
+                    dd[c] += (o[c] - 2.0 * p1[c] + p2[c]).powi(2);
                 }
                 m += 1;
             }
-            prev = Some(o);
+            if let Some(p1) = last {
+                prev = Some((p1, o));
+            }
+            last = Some(o);
         }
     }
     let l0 = h.l0_um;
@@ -212,9 +216,9 @@ fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
 }
 
 /// The record's noise energy against the model's 1 pm/√Hz (ν²): per lock-in channel, the
-/// energy of the sample-to-sample differences of the error between the record and a
-/// re-simulation `sim` of it on `span` (the slow, structural error barely moves between
-/// samples; the noise does) over the same for 1 pm/√Hz white displacement noise through
+/// energy of the second sample-to-sample differences of the error between the record and
+/// a re-simulation `sim` of it on `span` (the slow, structural error barely moves between
+/// samples, its second difference even less; the noise does) over the same for 1 pm/√Hz white displacement noise through
 /// the record's lock-in; the median over the ten channels (a structural error that does
 /// move fast lives on a few channels).
 pub fn noise_energy_ratio(
@@ -229,19 +233,19 @@ pub fn noise_energy_ratio(
         std::array::from_fn(|c| r[c] - o[c] * l0)
     };
     let (mut dd, mut m) = ([0.0; 10], 0usize);
-    let mut prev: Option<[f64; 10]> = None;
+    let (mut p2, mut p1): (Option<[f64; 10]>, Option<[f64; 10]>) = (None, None);
     for k in span {
         let e = err(k);
         if e.iter().all(|v| v.is_finite()) {
-            if let Some(p) = prev {
+            if let (Some(a), Some(b)) = (p2, p1) {
                 for c in 0..10 {
-                    dd[c] += (e[c] - p[c]).powi(2);
+                    dd[c] += (e[c] - 2.0 * b[c] + a[c]).powi(2);
                 }
                 m += 1;
             }
-            prev = Some(e);
+            (p2, p1) = (p1, Some(e));
         } else {
-            prev = None;
+            (p2, p1) = (None, None);
         }
     }
     anyhow::ensure!(m > 0, "no finite samples to estimate the record's noise");

@@ -238,6 +238,17 @@ impl Rows {
         Ok(rows)
     }
 
+    /// Removes `Δθ` (the calibration's refinement) from the gap: `y −= Φ·Δθ`.
+    pub(crate) fn remove_theta(&mut self, dtheta: &[f64; 14]) {
+        for (y, th) in self.y.iter_mut().zip(&self.base.theta) {
+            for (j, d) in dtheta.iter().enumerate() {
+                for r in 0..NR {
+                    y[r] -= d * th[j][r];
+                }
+            }
+        }
+    }
+
     /// The rate fitted on the rows after the warm-up (least squares on the rate column).
     fn fitted_rate(&self) -> f64 {
         let n = self.t.len();

@@ -20,8 +20,8 @@ use super::rank::Fits;
 use super::report::Candidate;
 use super::rows::{Rows, Spans};
 use super::{
-    GAP_MIN, NOISE_ROW_ENERGY, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX, SECOND_MIN,
-    SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    GAP_MIN, NOISE_ROW_ENERGY, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX,
+    SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
 };
 
 /// A one-word answer: `none`, `unknown` or an effect's name (report.json's `verdict` and

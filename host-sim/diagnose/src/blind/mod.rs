@@ -26,6 +26,8 @@ use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
+pub mod device;
+
 use crate::diagnose::{self, Answer, Model, Options, Report, to_json_sorted};
 use paragyro_simulator::effects::{Effect, EffectSpec, LIBRARY, OUT_OF_LIBRARY};
 use paragyro_simulator::par;
