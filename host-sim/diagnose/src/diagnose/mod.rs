@@ -58,6 +58,7 @@ pub mod howfar;
 pub mod locate;
 pub mod lsq;
 mod markdown;
+pub mod numerics;
 pub mod rank;
 pub mod report;
 pub mod resim;

@@ -33,7 +33,7 @@ pub(crate) struct Pass {
     pub w: ([f64; NROWS], [f64; NROWS]),
 }
 
-fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
+pub(crate) fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
     let mut cfg = config_for(rec);
     cfg.nominal = model.phys;
     cfg.nominal.gamma = gamma;
