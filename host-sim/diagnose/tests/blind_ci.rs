@@ -1,0 +1,24 @@
+//! The small blind run of CI on its fixed seed (toleranced devices, labels sealed before
+//! the diagnoses): the build fails when it falls below the thresholds stated in
+//! host-sim/diagnose/blind-benchmark.md (fixed before the scored run).
+
+use paragyro_diagnose::blind;
+
+#[test]
+fn small_blind_run_meets_its_thresholds() {
+    let dir = std::env::temp_dir().join(format!("paragyro-blind-ci-{}", std::process::id()));
+    let sm = blind::run(8, 7, &dir, &|m| println!("{m}")).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    println!("{sm:#?}");
+    let at_least = |v: Option<f64>, min: f64, what: &str| {
+        if let Some(v) = v {
+            assert!(v >= min, "{what}: {v} < {min}");
+        }
+    };
+    // clean devices read `none`
+    at_least(sm.false_alarms_on_clean.map(|f| 1.0 - f), 0.9, "clean `none`");
+    at_least(sm.top1_single_above_limit, 0.9, "top-1 above the limit");
+    at_least(sm.unknown_on_outside, 0.8, "unknown on out-of-library");
+    // every category of this seed is present
+    assert!(sm.clean_records > 0 && sm.single_above_limit_records > 0, "{sm:?}");
+}
