@@ -360,7 +360,11 @@ fn coverage(d: &Draw, r: &Report, sc: &Scenario) -> Option<(usize, usize)> {
     let names = paragyro_core::physics::PHYSICAL_NAMES;
     let mut n = (0, 0);
     for (i, name) in names.iter().enumerate().take(10) {
-        let p = r.parameter_face.parameters.iter().find(|p| p.name == *name)?;
+        let p = r
+            .parameter_face
+            .parameters
+            .iter()
+            .find(|p| p.name == *name)?;
         n.1 += 1;
         if (p.device - truth[i]).abs() <= p.sigma {
             n.0 += 1;

@@ -36,15 +36,31 @@ fn what_is_right_for_each_category() {
     use Effect::*;
     assert!(correct_for(Category::None, &[], Answer::None));
     assert!(!correct_for(Category::None, &[], Answer::Unknown));
-    assert!(correct_for(Category::Outside, &[QuadraticStiffness], Answer::Unknown));
-    assert!(!correct_for(Category::Outside, &[QuadraticStiffness], Answer::None));
+    assert!(correct_for(
+        Category::Outside,
+        &[QuadraticStiffness],
+        Answer::Unknown
+    ));
+    assert!(!correct_for(
+        Category::Outside,
+        &[QuadraticStiffness],
+        Answer::None
+    ));
     assert!(!correct_for(
         Category::Outside,
         &[QuadraticStiffness],
         Answer::Effect(ElectrostaticSoftening)
     ));
-    assert!(correct_for(Category::Single, &[Feedthrough], Answer::Effect(Feedthrough)));
-    assert!(!correct_for(Category::Single, &[Feedthrough], Answer::Effect(ForceLeak)));
+    assert!(correct_for(
+        Category::Single,
+        &[Feedthrough],
+        Answer::Effect(Feedthrough)
+    ));
+    assert!(!correct_for(
+        Category::Single,
+        &[Feedthrough],
+        Answer::Effect(ForceLeak)
+    ));
     assert!(!correct_for(Category::Single, &[Feedthrough], Answer::None));
     // two effects: either one named is right
     assert!(correct_for(
@@ -60,10 +76,30 @@ fn confusion_counts_truth_against_verdict() {
     let s = vec![
         rec(Category::None, &[], Answer::None, false),
         rec(Category::None, &[], Answer::Unknown, false),
-        rec(Category::Single, &[Feedthrough], Answer::Effect(Feedthrough), true),
-        rec(Category::Single, &[Feedthrough], Answer::Effect(Feedthrough), true),
-        rec(Category::Outside, &[QuadraticStiffness], Answer::Unknown, true),
-        rec(Category::Double, &[Feedthrough, ForceLeak], Answer::None, true),
+        rec(
+            Category::Single,
+            &[Feedthrough],
+            Answer::Effect(Feedthrough),
+            true,
+        ),
+        rec(
+            Category::Single,
+            &[Feedthrough],
+            Answer::Effect(Feedthrough),
+            true,
+        ),
+        rec(
+            Category::Outside,
+            &[QuadraticStiffness],
+            Answer::Unknown,
+            true,
+        ),
+        rec(
+            Category::Double,
+            &[Feedthrough, ForceLeak],
+            Answer::None,
+            true,
+        ),
     ];
     let c = confusion(&s);
     assert_eq!(c["none"]["none"], 1);
@@ -71,7 +107,10 @@ fn confusion_counts_truth_against_verdict() {
     assert_eq!(c["feedthrough"]["feedthrough"], 2);
     assert_eq!(c["outside:quadratic_stiffness"]["unknown"], 1);
     assert_eq!(c["two effects"]["none"], 1);
-    assert_eq!(c.values().map(|v| v.values().sum::<usize>()).sum::<usize>(), 6);
+    assert_eq!(
+        c.values().map(|v| v.values().sum::<usize>()).sum::<usize>(),
+        6
+    );
 }
 
 #[test]
@@ -80,10 +119,20 @@ fn summary_shares() {
     let s = vec![
         rec(Category::None, &[], Answer::None, false),
         rec(Category::None, &[], Answer::Unknown, false),
-        rec(Category::Single, &[Feedthrough], Answer::Effect(Feedthrough), true),
+        rec(
+            Category::Single,
+            &[Feedthrough],
+            Answer::Effect(Feedthrough),
+            true,
+        ),
         rec(Category::Single, &[ForceLeak], Answer::None, true),
         rec(Category::Single, &[ForceLeak], Answer::None, false),
-        rec(Category::Outside, &[QuadraticStiffness], Answer::Unknown, true),
+        rec(
+            Category::Outside,
+            &[QuadraticStiffness],
+            Answer::Unknown,
+            true,
+        ),
     ];
     let sm = summarize(&s, 6, 1);
     assert_eq!(sm.false_alarms_on_clean, Some(0.5));

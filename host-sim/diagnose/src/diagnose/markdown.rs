@@ -34,7 +34,7 @@ fn parameter_face(s: &mut String, r: &Report) {
             p.t
         ));
     }
-    s.push_str("\n");
+    s.push('\n');
     for h in &f.hypotheses {
         s.push_str(&format!("- **{}** ({}): {}\n", h.name, h.status, h.detail));
     }

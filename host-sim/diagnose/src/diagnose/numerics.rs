@@ -101,7 +101,9 @@ pub fn numerics_gap(rec: &Record, model: &Model, steps: usize) -> anyhow::Result
         .map(|j| pb.theta.iter().map(|c| c[j]).collect())
         .collect();
     let refs: Vec<&[[f64; NR]]> = cols.iter().map(|c| c.as_slice()).collect();
-    let bank = Bank::build(&refs, &d, &ok, &[0..n], 0..0);
+    // one block (the covariance is not used)
+    let whole: Vec<std::ops::Range<usize>> = std::iter::once(0..n).collect();
+    let bank = Bank::build(&refs, &d, &ok, &whole, 0..0);
     let fit = bank.fit(&(0..14).collect::<Vec<_>>());
     let energy = |resid: &dyn Fn(usize) -> [f64; NR]| -> Vec<(String, f64)> {
         let mut acc = [0.0; NR];
