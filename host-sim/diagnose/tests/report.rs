@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 
+use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
 use paragyro_diagnose::diagnose::report::{BeatScan, FORMAT};
 use paragyro_diagnose::diagnose::{
@@ -173,6 +174,28 @@ fn report() -> impl Strategy<Value = Report> {
                     rows: 41_000,
                 },
                 output_error: far,
+                parameter_face: ParameterFace {
+                    parameters: vec![ParamDeviation {
+                        name: "wy2".into(),
+                        model: 1.0265,
+                        device: 1.0275 + gb,
+                        sigma: 1e-8,
+                        relative: Some(0.001),
+                        relative_sigma: Some(1e-8),
+                        t: 1e5,
+                    }],
+                    hypotheses: vec![FaceHypothesis {
+                        name: "tolerance".into(),
+                        status: "null".into(),
+                        size: None,
+                        sigma: Some(ga),
+                        detail: "independent".into(),
+                    }],
+                    rate_offset_dps: rate.flatten(),
+                    noise_energy_ratio: 1.02,
+                    resimulations: 2,
+                },
+                residual_over_noise: un,
                 location,
                 model: "Table 2 (default)".into(),
                 rate: match rate {
@@ -200,8 +223,8 @@ fn report() -> impl Strategy<Value = Report> {
         )
 }
 
-/// The keys of report.json (format 1), unchanged by the typed report.
-const KEYS: [&str; 24] = [
+/// The keys of report.json (format 2: format 1's and the parameter face).
+const KEYS: [&str; 26] = [
     "closest_library_effect",
     "energies",
     "format",
@@ -212,8 +235,10 @@ const KEYS: [&str; 24] = [
     "held_out_by_row",
     "model",
     "output_error",
+    "parameter_face",
     "ranking",
     "rate",
+    "residual_over_noise",
     "samples",
     "secondary",
     "seconds",

@@ -149,7 +149,9 @@ impl Effect {
             Effect::AngularVibration => {
                 "γ1 °/s [@beat Hz, default 1.5]: γ + γ1·sin(Ω_v t), Ω_v = pump + beat"
             }
-            Effect::ElectrostaticSoftening => "κ: sense −κ(Y + c3·Y³), c3 = 2/9",
+            Effect::ElectrostaticSoftening => {
+                "κ [@1: driven by the pump, ×s]: sense −κ(Y + c3·Y³), c3 = 2/9"
+            }
             Effect::Feedthrough => "C µm: measured Y + C·s(1 + cos2ψ)",
             Effect::NonlinearDamping => "η: drive −ηX²X', sense −ηY²Y'",
             Effect::Anisodamping => "d: drive −(d/2)Y', sense +(d/2)X' (rate bias −d/4 in γ)",
@@ -182,9 +184,14 @@ impl Effect {
         self.signature().is_some()
     }
 
-    /// Whether it takes a secondary parameter (`NAME=SIZE@PARAM`): the vibration's beat, Hz.
+    /// Whether it takes a secondary parameter (`NAME=SIZE@PARAM`): the vibration's beat, Hz;
+    /// the electrostatic softening's drive (`@1`: its electrodes carry the pump voltage, so
+    /// κ scales with the pump's mean square s; `@0` or none: a fixed bias).
     pub const fn takes_param(self) -> bool {
-        matches!(self, Effect::AngularVibration)
+        matches!(
+            self,
+            Effect::AngularVibration | Effect::ElectrostaticSoftening
+        )
     }
 
     /// How the simulator adds it: `size` (and `param`) into the plant's effect sizes
@@ -205,7 +212,18 @@ impl Effect {
                     e.vib_beat_hz = b;
                 }
             }
-            Effect::ElectrostaticSoftening => e.electrostatic += v,
+            Effect::ElectrostaticSoftening => {
+                e.electrostatic += v;
+                match param {
+                    None => {}
+                    Some(p) if p == 0.0 || p == 1.0 => e.es_pump = p == 1.0,
+                    Some(p) => {
+                        return Err(format!(
+                            "electrostatic_softening@{p}: the drive is @0 (fixed bias) or @1 (the pump's s)"
+                        ));
+                    }
+                }
+            }
             Effect::Feedthrough => e.feedthrough += v,
             Effect::NonlinearDamping => e.nl_damping += v,
             Effect::Anisodamping => e.anisodamping += v,
@@ -325,7 +343,7 @@ impl FromStr for EffectSpec {
         let param = param.map(|p| num(p, "parameter")).transpose()?;
         if param.is_some() && !effect.takes_param() {
             return Err(format!(
-                "'{s}': only angular_vibration takes @PARAM (beat, Hz)"
+                "'{s}': only angular_vibration (@beat Hz) and electrostatic_softening (@0 or @1) take @PARAM"
             ));
         }
         Ok(EffectSpec {
@@ -350,6 +368,8 @@ pub struct Effects {
     pub vib_phase0: f64,
     /// Electrostatic softening κ.
     pub electrostatic: f64,
+    /// The softening's electrodes carry the pump voltage: κ × s (its mean square).
+    pub es_pump: bool,
     /// Pump feedthrough into the sense pick-off, L0 per unit s.
     pub feedthrough: f64,
     /// Amplitude-dependent damping η.

@@ -293,7 +293,7 @@ fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
         - fx.quadratic * x2;
     let dy = fx.geometric * y * xd * xd + (0.5 * fx.anisodamping - 2.0 * d.gv) * xd
         - d.gvd * x
-        - fx.electrostatic * y * (1.0 + ES_C3 * y2)
+        - fx.electrostatic * (if fx.es_pump { d.s } else { 1.0 }) * y * (1.0 + ES_C3 * y2)
         - fx.nl_damping * y2 * yd
         + fx.force_leak * pump * x * (th.drive[5] + th.drive[6] * x2)
         - fx.quadratic * y2;

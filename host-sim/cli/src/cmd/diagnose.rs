@@ -87,6 +87,26 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
                 100.0 * o.closure
             ))
     ));
+    let face = &r.parameter_face;
+    let sig: Vec<String> = face
+        .parameters
+        .iter()
+        .filter(|p| p.t.abs() >= paragyro_diagnose::diagnose::calibrate::T_PARAM)
+        .map(paragyro_diagnose::diagnose::calibrate::describe)
+        .collect();
+    text.push_str(&format!(
+        "Parameter face: {}; record noise {:.3} × 1 pm/√Hz (energy), held-out residual {:.3} × it\n",
+        if sig.is_empty() {
+            "no deviation at 3σ".into()
+        } else {
+            sig.join(", ")
+        },
+        face.noise_energy_ratio,
+        r.residual_over_noise
+    ));
+    for h in face.hypotheses.iter().filter(|h| h.status == "named") {
+        text.push_str(&format!("  {} named: {}\n", h.name, h.detail));
+    }
     text.push_str(&format!(
         "Took {:.2} s. Wrote {} files to {}\n",
         r.seconds,

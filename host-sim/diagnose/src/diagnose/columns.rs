@@ -249,14 +249,14 @@ fn theta_column(id: ColumnId, base: &Pass, f: ThetaFn<'_>) -> Column {
     }
 }
 
-/// The column bank: the rate (unless a rate table fixes it), the 14 θ, the library's
-/// testable effects, the vibration pair, then (after [`Columns::with_catch_all`]) the
-/// catch-all monomials.
+/// The column bank: the 14 θ (the baseline: the calibration refined on the fit span), the
+/// library's testable effects, the vibration pair, then (after [`Columns::with_catch_all`])
+/// the catch-all monomials.
 pub(crate) struct Columns {
     pub cols: Vec<Column>,
-    /// The baseline columns (the rate, or none).
+    /// The baseline columns (the 14 θ).
     pub base_cols: Vec<usize>,
-    /// The catch-all: the 14 θ and the monomials.
+    /// The catch-all: the monomials (on top of the baseline's θ).
     pub ca_idx: Vec<usize>,
     /// Library effects this record cannot test, and why.
     pub untestable: Vec<(Effect, String)>,
@@ -272,26 +272,30 @@ impl Columns {
         rows: &Rows,
         spans: &Spans,
     ) -> anyhow::Result<Self> {
-        let mut cols: Vec<Column> = Vec::new();
-        if rows.rate_ref.is_none() {
-            cols.push(Column {
-                id: ColumnId::Rate,
-                v: rows.gamma_col.clone(),
-            });
-        }
-        let n_base = cols.len();
-        for j in 0..14 {
-            cols.push(Column {
+        // the baseline: the 14 θ (the calibration's refinement; the rate is θ14 − θ24)
+        let mut cols: Vec<Column> = (0..14)
+            .map(|j| Column {
                 id: ColumnId::Theta(j),
                 v: rows.base.theta.iter().map(|c| c[j]).collect(),
-            });
-        }
+            })
+            .collect();
+        let n_base = cols.len();
+        // the beat scan's own baseline: the rate alone (a 14-column baseline in each of its
+        // ~140 fits would cost 25× more; the gap is already calibrated)
+        let scan_base: Vec<Column> = if rows.rate_ref.is_none() {
+            vec![Column {
+                id: ColumnId::Rate,
+                v: rows.gamma_col.clone(),
+            }]
+        } else {
+            Vec::new()
+        };
         let mut untestable = Vec::new();
         let mut beat = 0.0;
         // the force terms are synthesised together (one synthesis per sample)
         let mut forces: Vec<(ColumnId, Box<ForceFn>)> = Vec::new();
         for effect in LIBRARY {
-            match library_columns(effect, rec, opts, rows, spans, &cols[..n_base])? {
+            match library_columns(effect, rec, opts, rows, spans, &scan_base)? {
                 Plan::Force(f) => forces.push((ColumnId::Effect(effect), f)),
                 Plan::Columns(c) => cols.extend(c),
                 Plan::Vibration(b, pair) => {
@@ -307,7 +311,7 @@ impl Columns {
         Ok(Columns {
             cols,
             base_cols: (0..n_base).collect(),
-            ca_idx: (n_base..n_base + 14).collect(),
+            ca_idx: Vec::new(),
             untestable,
             beat,
         })
@@ -380,15 +384,18 @@ fn library_columns(
             let x = w.x[j];
             (0.0, w.s * (1.0 + w.c2[j]) * x * (th1m[5] + th1m[6] * x * x))
         })),
-        // −(θ22 column + c3·θ25 column)
-        Effect::ElectrostaticSoftening => theta(&|c, _, r| -(c[9][r] + ES_C3 * c[12][r])),
-        // −(d/2)Y' on the drive (θ14 column), +(d/2)X' on the sense (θ24)
-        Effect::Anisodamping => match rows.rate_ref {
-            Some(_) => theta(&|c, _, r| -0.5 * c[3][r] + 0.5 * c[11][r]),
-            None => Plan::Untestable(
-                "identical to a rate offset without a rate table (rate_ref_dps): record on a rate table or with zero-rate segments".into(),
-            ),
-        },
+        // −(θ22 column + c3·θ25 column) × s: a softening whose electrodes carry the pump
+        // (a fixed one is a tolerance of wy2 and alpha_y: the parameter face)
+        Effect::ElectrostaticSoftening => {
+            let s: Vec<f64> = rows.base.known.iter().map(|k| 1.0 + k.ds).collect();
+            theta(&move |c, k, r| -(c[9][r] + ES_C3 * c[12][r]) * s[k])
+        }
+        // −(d/2)Y' on the drive (θ14 column), +(d/2)X' on the sense (θ24): moves θ14
+        // against θ24, which the calibration fits: the parameter face tests it
+        Effect::Anisodamping => Plan::Untestable(match rows.rate_ref {
+            Some(_) => "a constant θ14 − θ24 against the rate table: tested on the parameter face (the calibration)".into(),
+            None => "identical to a rate offset without a rate table (rate_ref_dps): record on a rate table or with zero-rate segments".into(),
+        }),
         Effect::ThermalDrift => match &rows.temps {
             Some(tc)
                 if tc.iter().cloned().fold(f64::MIN, f64::max)

@@ -4,14 +4,14 @@
 
 use paragyro_core::Cplx;
 use paragyro_core::physics::rate_dps_from_gamma;
-use paragyro_simulator::effects::{EffectSpec, Signature};
+use paragyro_simulator::effects::{Effect, EffectSpec, Signature};
 use serde::{Deserialize, Serialize};
 
 use super::columns::Columns;
 use super::resim::{OutputError, Resim, lockin_noise_diff_ratio, output_error};
 use super::rows::Rows;
 use super::verdict::Decision;
-use super::{Stage, Timing};
+use super::{Model, Stage, Timing};
 
 /// What the re-simulation with the verdict's effect(s) does to the output error
 /// (report.json's `output_error`).
@@ -73,7 +73,8 @@ fn verdict_specs(cols: &Columns, rows: &Rows, decision: &Decision) -> (Vec<Effec
             specs.push(EffectSpec {
                 effect,
                 size: f.beta[k],
-                param: None,
+                // the structural face tests the softening driven by the pump
+                param: (effect == Effect::ElectrostaticSoftening).then_some(1.0),
             });
             k += 1;
         }
@@ -81,10 +82,13 @@ fn verdict_specs(cols: &Columns, rows: &Rows, decision: &Decision) -> (Vec<Effec
     (specs, vib_phase)
 }
 
-/// Re-runs the simulator with the verdict's effect(s) on the held-out span.
+/// Re-runs the simulator with the verdict's effect(s) on the held-out span: the calibrated
+/// model with its θ refitted jointly with the effect (`model_after`; the calibration alone
+/// absorbed part of the effect), against the calibrated model alone.
 pub(crate) fn how_far(
     st: &Stage<'_>,
     decision: &Decision,
+    model_after: &Model,
     timing: &mut Timing,
 ) -> anyhow::Result<Far> {
     let Stage {
@@ -93,11 +97,11 @@ pub(crate) fn how_far(
         rows,
         spans,
         cols,
-        fits,
+        fits: _,
     } = *st;
     let gamma_fit = match (&rows.rate_ref, rows.gamma_sim) {
         (Some(_), _) => None,
-        (None, Some(g)) => Some(g + fits.base_fit.beta.first().copied().unwrap_or(0.0)),
+        (None, Some(g)) => Some(g),
         (None, None) => Some(rows.gamma_nom),
     };
     let (specs, vib_phase) = verdict_specs(cols, rows, decision);
@@ -113,16 +117,19 @@ pub(crate) fn how_far(
     // the effect's run covers the held-out span (starting 0.5 s early from the record)
     let resim = Resim {
         rec,
-        model: &opts.model,
-        gamma: gamma_fit,
+        model: model_after,
+        gamma: gamma_fit.map(|_| model_after.phys.gamma),
         rate_ref: rows.rate_ref.as_deref(),
         effects: &specs,
         vib_phase0: vib_phase,
         steps_per_period: opts.steps_per_period,
     };
-    let after_h = resim.run(hold_start..last + 1)?;
     let mut after = before.clone();
-    after[hold_start..last + 1].clone_from_slice(&after_h);
+    if !specs.is_empty() {
+        // (no effect added: the run would be the calibrated model's again)
+        let after_h = resim.run(hold_start..last + 1)?;
+        after[hold_start..last + 1].clone_from_slice(&after_h);
+    }
     let ratio = lockin_noise_diff_ratio(rec)?;
     let b = output_error(rec, before, hold_start..last + 1, ratio);
     let a = output_error(rec, &after, hold_start..last + 1, ratio);

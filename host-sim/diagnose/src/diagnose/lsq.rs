@@ -113,6 +113,8 @@ pub(crate) struct Fit {
     pub cols: Vec<usize>,
     pub beta: Vec<f64>,
     pub sigma: Vec<f64>,
+    /// The cluster-robust covariance of `beta` (row-major).
+    pub cov: Vec<f64>,
     /// Fit-span energy.
     pub e_fit: f64,
     /// Held-out energy.
@@ -192,18 +194,32 @@ impl Bank {
         }
         let nb = self.blocks.len() as f64;
         let corr = if nb > 1.0 { nb / (nb - 1.0) } else { 1.0 };
-        let sigma = (0..p)
-            .map(|i| {
-                let mut v = 0.0;
-                for a in 0..p {
+        // G⁻¹·meat, then ·G⁻¹ (2p³)
+        let mut tmp = vec![0.0; p * p];
+        for i in 0..p {
+            for a in 0..p {
+                let ia = inv[i * p + a];
+                if ia != 0.0 {
                     for c in 0..p {
-                        v += inv[i * p + a] * meat[a * p + c] * inv[c * p + i];
+                        tmp[i * p + c] += ia * meat[a * p + c];
                     }
                 }
-                (v * corr).max(0.0).sqrt()
-            })
-            .collect();
+            }
+        }
+        let mut cov = vec![0.0; p * p];
+        for i in 0..p {
+            for c in 0..p {
+                let t = tmp[i * p + c] * corr;
+                if t != 0.0 {
+                    for j in 0..p {
+                        cov[i * p + j] += t * inv[c * p + j];
+                    }
+                }
+            }
+        }
+        let sigma = (0..p).map(|i| cov[i * p + i].max(0.0).sqrt()).collect();
         Fit {
+            cov,
             cols: s.to_vec(),
             e_fit: self.fit.energy(s, &beta),
             e_hold: self.hold.energy(s, &beta),

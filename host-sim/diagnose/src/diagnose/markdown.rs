@@ -13,6 +13,33 @@ fn g4(v: f64) -> String {
     }
 }
 
+/// The parameter face: the calibrated device against the model, and the hypotheses.
+fn parameter_face(s: &mut String, r: &Report) {
+    let f = &r.parameter_face;
+    s.push_str(&format!(
+        "\n## Parameter face (the device calibrated on the record)\n\nRecord noise: {:.3} × the energy of 1 pm/√Hz (estimated from the record); held-out residual of the calibrated model {:.3} × that noise per row.\n\n| parameter | model | device | ± 1σ | deviation | t |\n|---|---|---|---|---|---|\n",
+        f.noise_energy_ratio, r.residual_over_noise
+    ));
+    for p in &f.parameters {
+        let dev = match (p.relative, p.relative_sigma) {
+            (Some(a), Some(b)) => format!("{:+.4} % ± {:.4} %", 100.0 * a, 100.0 * b),
+            _ => format!("{:+.3e}", p.device - p.model),
+        };
+        s.push_str(&format!(
+            "| {} | {} | {} | {:.2e} | {dev} | {:+.1} |\n",
+            p.name,
+            g4(p.model),
+            g4(p.device),
+            p.sigma,
+            p.t
+        ));
+    }
+    s.push('\n');
+    for h in &f.hypotheses {
+        s.push_str(&format!("- **{}** ({}): {}\n", h.name, h.status, h.detail));
+    }
+}
+
 /// report.md of a report of the record `record_name`.
 pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
     let mut s = format!("# Sim-to-real diagnosis of `{record_name}`\n\n");
@@ -27,11 +54,12 @@ pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
         r.rate.source()
     ));
     s.push_str(&verdict_text(r));
+    parameter_face(&mut s, r);
     how_far(&mut s, r);
     which(&mut s, r);
     place(&mut s, r);
     s.push_str(&format!(
-        "\n## Method\n\nThe record's rows about the model (the core's estimator, never re-linearised, rows weighted to unit noise) minus the rows of the simulator re-run on the record's inputs; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the best held-out energy of any model: each effect, the catch-all (14 θ free plus the quadratic and cubic force monomials), and both together. Thresholds: size/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap, at most {:.0} % of the gap above the noise left unexplained. See host-sim/diagnose/README.md.\n",
+        "\n## Method\n\nThe device's θ calibrated on the fit span (batch least squares, the simulator re-run with them, refined); the record's rows about the calibrated model (the core's estimator, never re-linearised, rows weighted to unit noise) minus the rows of the simulator re-run on the record's inputs; each library effect fitted with the rate on the fit span {:.1}–{:.1} s and scored on the held-out span {:.1}–{:.1} s (guard {GUARD_S} s). The floor is the best held-out energy of any model: each effect, the catch-all (14 θ free plus the quadratic and cubic force monomials), and both together. Thresholds: size/σ ≥ {T_SIG}, gap ≥ {:.0} % of the baseline, verdict share ≥ {:.0} % of the explainable gap, at most {:.0} % of the gap above the noise left unexplained. See host-sim/diagnose/README.md.\n",
         r.spans_s.fit[0],
         r.spans_s.fit[1],
         r.spans_s.held_out[0],

@@ -52,11 +52,13 @@ use paragyro_core::Physical;
 use paragyro_core::rows::NROWS;
 use paragyro_simulator::record::Record;
 
+pub mod calibrate;
 pub mod columns;
 pub mod howfar;
 pub mod locate;
 pub mod lsq;
 mod markdown;
+pub mod numerics;
 pub mod rank;
 pub mod report;
 pub mod resim;
@@ -98,10 +100,14 @@ pub const T_SIG: f64 = 5.0;
 pub const GAP_MIN: f64 = 0.05;
 /// An effect is the verdict when it closes at least this share of what the floor closes.
 pub const SHARE_MIN: f64 = 0.6;
-/// Held-out energy per weighted row of a record of the model itself (noise plus the rows'
-/// residual approximations), measured on development records (seed 1 of `blind`: 1.01–1.12,
-/// mean 1.08).
+/// Held-out energy per weighted row of a record of the model itself at the model's noise
+/// density (1 pm/√Hz), measured on development records (seed 1 of `blind`: 1.01–1.12,
+/// mean 1.08). The record's own noise per row is this × its noise energy ratio ν²
+/// (estimated from the record, [`resim::noise_energy_ratio`]).
 pub const NOISE_ROW_ENERGY: f64 = 1.08;
+/// `none` needs the held-out residual of the calibrated model at most this × the
+/// record's own noise per row (otherwise a gap is there, explained or not).
+pub const NONE_NOISE_MAX: f64 = 1.1;
 /// The verdict's effect(s) may leave at most this share of the held-out gap above the noise
 /// unexplained; otherwise the answer is `unknown` (something else is there too).
 pub const UNEXPLAINED_MAX: f64 = 0.05;
@@ -135,6 +141,9 @@ pub struct Model {
     pub phys: Physical,
     /// Where it came from (for the report).
     pub source: String,
+    /// Added to a rate table's γ when the simulator runs on a record with one: the
+    /// calibrated departure of (θ14 − θ24)/4 from the table (0 for a configured model).
+    pub gamma_offset: f64,
 }
 
 impl Model {
@@ -143,6 +152,7 @@ impl Model {
         Model {
             phys: paragyro_core::physics::TABLE2,
             source: "Table 2 (default)".into(),
+            gamma_offset: 0.0,
         }
     }
 
@@ -165,6 +175,7 @@ impl Model {
         Model {
             phys,
             source: format!("scenario '{}' ({})", sc.name, sc.source),
+            gamma_offset: 0.0,
         }
     }
 }
@@ -228,8 +239,58 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let wall = Instant::now();
     let mut timing = Timing::new();
     // 1. the record's rows about the model (minus the simulator's on the same inputs)
-    let rows = rows::Rows::build(rec, opts, &mut timing)?;
-    let spans = rows::Spans::of(&rows)?;
+    // (without the re-simulation: the calibration's first fit sees the rows' own
+    // approximations, which the fit on the calibrated re-simulation removes)
+    let rows0 = rows::Rows::build(
+        rec,
+        &Options {
+            resimulate: false,
+            ..opts.clone()
+        },
+        &mut timing,
+    )?;
+    let spans0 = rows::Spans::of(&rows0)?;
+    // 1b. calibrate: the device's θ on the fit span, the simulator re-run with them, the
+    // fit refined on the new gap (the parameter face)
+    let fit0 = calibrate::fit_theta(&rows0, &spans0);
+    let cal_model = calibrate::calibrated_model(
+        &opts.model,
+        &rows0,
+        &fit0,
+        &format!("{} calibrated on the record", opts.model.source),
+    );
+    timing.tick("calibration_fit");
+    let opts_cal = Options {
+        model: cal_model,
+        ..opts.clone()
+    };
+    let (rows, spans) = if opts.resimulate {
+        let r = rows::Rows::build(rec, &opts_cal, &mut timing)?;
+        let s = rows::Spans::of(&r)?;
+        (r, s)
+    } else {
+        (rows0, spans0)
+    };
+    let mut rows = rows;
+    let fit1 = calibrate::fit_theta(&rows, &spans);
+    // the calibration's refinement is part of the model: the structural face starts from
+    // the gap it leaves
+    rows.remove_theta(&fit1.dtheta);
+    let nu2 = match &rows.before_sim {
+        Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1)?,
+        None => 1.0,
+    };
+    let cfg_model = opts.model.clone();
+    let (face, _device) = calibrate::face(
+        &cfg_model,
+        &opts_cal.model,
+        &rows,
+        &fit1,
+        nu2,
+        1 + usize::from(opts.resimulate),
+    );
+    timing.tick("parameter_face");
+    let opts = &opts_cal;
     // 2. the candidates' columns (the vibration's beat scanned), then the catch-all
     let cols = columns::Columns::build(rec, opts, &rows, &spans)?;
     timing.tick("library_columns_and_beat_scan");
@@ -239,7 +300,30 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     timing.tick("catch_all_and_grams");
     let ranking = rank::rank(&cols, &rows, &spans, &fits);
     // 4. the verdict
-    let decision = verdict::decide(&cols, &rows, &spans, &fits, &ranking);
+    let decision = verdict::decide(&cols, &rows, &spans, &fits, &ranking, &face);
+    // the parameter face with the verdict's effect(s) fitted jointly (an unmodelled force
+    // otherwise leaks into the θ)
+    let (face, joint_model) = if decision.verdict_cols.is_empty() {
+        (face, opts.model.clone())
+    } else {
+        let joint = calibrate::ThetaFit::joint(&fit1, &decision.after_fit);
+        let m = calibrate::calibrated_model(
+            &opts.model,
+            &rows,
+            &joint,
+            &format!("{} with the verdict's effect", opts.model.source),
+        );
+        let f = calibrate::face(
+            &cfg_model,
+            &opts.model,
+            &rows,
+            &joint,
+            face.noise_energy_ratio,
+            face.resimulations,
+        )
+        .0;
+        (f, m)
+    };
     let st = Stage {
         rec,
         opts,
@@ -251,7 +335,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     // 5. where the gap lies
     let place = locate::locate(&st, &decision);
     // 6. how far it closes once the verdict's effect is added
-    let far = howfar::how_far(&st, &decision, &mut timing)?;
+    let far = howfar::how_far(&st, &decision, &joint_model, &mut timing)?;
     let report = report::assemble(report::Parts {
         opts,
         rows: &rows,
@@ -260,6 +344,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         fits: &fits,
         ranking,
         decision,
+        face,
         place: place.report,
         far: &far,
         seconds: wall.elapsed().as_secs_f64(),

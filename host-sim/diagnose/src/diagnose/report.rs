@@ -10,6 +10,7 @@ use paragyro_core::physics::rate_dps_from_gamma;
 use paragyro_simulator::effects::Effect;
 use serde::{Deserialize, Serialize};
 
+pub use super::calibrate::ParameterFace;
 use super::columns::Columns;
 use super::howfar::Far;
 pub use super::howfar::HowFar;
@@ -19,12 +20,13 @@ use super::rank::Fits;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Verdict};
 use super::{
-    COHERENT, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, Options, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_LABELS,
-    ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX, VIB_BEAT_MAX_HZ,
+    COHERENT, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options, ROW_GAP_MIN,
+    ROW_GAP_SHARE, ROW_LABELS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    VIB_BEAT_MAX_HZ,
 };
 
 /// The format tag of report.json.
-pub const FORMAT: &str = "paragyro-diagnosis 1";
+pub const FORMAT: &str = "paragyro-diagnosis 2";
 
 /// One candidate's result.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -118,6 +120,7 @@ pub struct Thresholds {
     pub second_min: f64,
     pub coherent: f64,
     pub noise_row_energy: f64,
+    pub none_noise_max: f64,
     pub unexplained_max: f64,
     pub row_gap_share: f64,
     pub row_gap_min: f64,
@@ -134,6 +137,7 @@ impl Thresholds {
             second_min: SECOND_MIN,
             coherent: COHERENT,
             noise_row_energy: NOISE_ROW_ENERGY,
+            none_noise_max: NONE_NOISE_MAX,
             unexplained_max: UNEXPLAINED_MAX,
             row_gap_share: ROW_GAP_SHARE,
             row_gap_min: ROW_GAP_MIN,
@@ -188,6 +192,11 @@ pub struct Report {
     pub energies: Energies,
     /// The re-simulation's output error (none without it).
     pub output_error: Option<HowFar>,
+    /// The parameter face: the calibrated device against the model, and its hypotheses.
+    pub parameter_face: ParameterFace,
+    /// Held-out baseline energy per row over the record's own noise per row
+    /// ([`NOISE_ROW_ENERGY`] × the record's noise energy ratio): about 1 at the noise.
+    pub residual_over_noise: f64,
     #[serde(rename = "where")]
     pub location: Where,
     /// The simulator configuration compared with.
@@ -257,6 +266,7 @@ pub(crate) struct Parts<'a> {
     pub fits: &'a Fits,
     pub ranking: Vec<Candidate>,
     pub decision: Decision,
+    pub face: ParameterFace,
     pub place: Located,
     pub far: &'a Far,
     pub seconds: f64,
@@ -301,6 +311,8 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
             rows: p.fits.bank.hold.rows,
         },
         output_error: p.far.report.clone(),
+        residual_over_noise: d.residual_over_noise,
+        parameter_face: p.face,
         location: p.place.location,
         model: p.opts.model.source.clone(),
         rate,

@@ -150,6 +150,112 @@ pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
     Ok(if nn > 0.0 { dd / nn } else { 1.0 })
 }
 
+/// The ten lock-in channels of a sample (DC, 1st, 3rd harmonics of both axes).
+fn channels(o: &LockinOut) -> [f64; 10] {
+    [
+        o.x0_um,
+        o.x_um[0].re,
+        o.x_um[0].im,
+        o.x_um[2].re,
+        o.x_um[2].im,
+        o.y0_um,
+        o.y_um[0].re,
+        o.y_um[0].im,
+        o.y_um[2].re,
+        o.y_um[2].im,
+    ]
+}
+
+/// Lock-in output noise of white displacement noise at 1 pm/√Hz (the simulator's lock-in
+/// at the record's settings, gyro at rest), per channel: the energy of the
+/// second sample-to-sample differences per sample, µm².
+fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
+    let h = &rec.header;
+    let omega0 = TAU * h.f0_hz;
+    let cfg = SimConfig {
+        omega0_rad_s: omega0,
+        fs_hz: h.fs_hz,
+        steps_per_period: 32,
+        omega_max: 1.05,
+        lpf_order: h.lockin_lpf_order,
+        lpf_hz: h.lockin_lpf_hz,
+        noise_density: 1e-6,
+        seed: 7,
+    };
+    let mut sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let mut th = Theta::table2();
+    th.drive[5] = 0.0;
+    th.drive[6] = 0.0;
+    let u = PlantInputs {
+        omega: 1.0,
+        s: 1.0,
+        ax: 0.0,
+        ay: 0.0,
+    };
+    let mut prev: Option<([f64; 10], [f64; 10])> = None;
+    let mut last: Option<[f64; 10]> = None;
+    let (mut dd, mut m) = ([0.0; 10], 0usize);
+    for k in 0..4000 {
+        sim.advance(&th, &u, &u);
+        let o = channels(&sim.lockin());
+        if k >= 20 {
+            if let Some((p2, p1)) = &prev {
+                for c in 0..10 {
+                    dd[c] += (o[c] - 2.0 * p1[c] + p2[c]).powi(2);
+                }
+                m += 1;
+            }
+            if let Some(p1) = last {
+                prev = Some((p1, o));
+            }
+            last = Some(o);
+        }
+    }
+    let l0 = h.l0_um;
+    Ok(dd.map(|v| v * l0 * l0 / m.max(1) as f64))
+}
+
+/// The record's noise energy against the model's 1 pm/√Hz (ν²): per lock-in channel, the
+/// energy of the second sample-to-sample differences of the error between the record and
+/// a re-simulation `sim` of it on `span` (the slow, structural error barely moves between
+/// samples, its second difference even less; the noise does) over the same for 1 pm/√Hz white displacement noise through
+/// the record's lock-in; the median over the ten channels (a structural error that does
+/// move fast lives on a few channels).
+pub fn noise_energy_ratio(
+    rec: &Record,
+    sim: &[LockinOut],
+    span: std::ops::Range<usize>,
+) -> anyhow::Result<f64> {
+    let e1 = lockin_noise_diff_energy(rec)?;
+    let l0 = rec.header.l0_um;
+    let err = |k: usize| -> [f64; 10] {
+        let (r, o) = (channels(&rec.rows[k].lockin), channels(&sim[k]));
+        std::array::from_fn(|c| r[c] - o[c] * l0)
+    };
+    let (mut dd, mut m) = ([0.0; 10], 0usize);
+    let (mut p2, mut p1): (Option<[f64; 10]>, Option<[f64; 10]>) = (None, None);
+    for k in span {
+        let e = err(k);
+        if e.iter().all(|v| v.is_finite()) {
+            if let (Some(a), Some(b)) = (p2, p1) {
+                for c in 0..10 {
+                    dd[c] += (e[c] - 2.0 * b[c] + a[c]).powi(2);
+                }
+                m += 1;
+            }
+            (p2, p1) = (p1, Some(e));
+        } else {
+            (p2, p1) = (None, None);
+        }
+    }
+    anyhow::ensure!(m > 0, "no finite samples to estimate the record's noise");
+    let mut r: Vec<f64> = (0..10)
+        .map(|c| dd[c] / m as f64 / e1[c].max(1e-300))
+        .collect();
+    r.sort_by(f64::total_cmp);
+    Ok(0.5 * (r[4] + r[5]))
+}
+
 /// Output error of re-simulated lock-in outputs `sim` (indexed like the record) against
 /// the record on `span`: rms error of the DC, 1st and 3rd harmonic channels relative to
 /// the rms of the record's channels of both axes; `diff_ratio` from
@@ -289,7 +395,7 @@ impl Resim<'_> {
                 break;
             }
             phys.gamma = match (rate_ref, gamma) {
-                (Some(rr), _) => gpd * rr[k],
+                (Some(rr), _) => gpd * rr[k] + model.gamma_offset,
                 (None, Some(g)) => g,
                 (None, None) => model.phys.gamma,
             };

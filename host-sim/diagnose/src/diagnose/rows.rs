@@ -33,7 +33,7 @@ pub(crate) struct Pass {
     pub w: ([f64; NROWS], [f64; NROWS]),
 }
 
-fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
+pub(crate) fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
     let mut cfg = config_for(rec);
     cfg.nominal = model.phys;
     cfg.nominal.gamma = gamma;
@@ -236,6 +236,17 @@ impl Rows {
         timing.tick("rows");
         rows.subtract_simulator(rec, opts, timing)?;
         Ok(rows)
+    }
+
+    /// Removes `Δθ` (the calibration's refinement) from the gap: `y −= Φ·Δθ`.
+    pub(crate) fn remove_theta(&mut self, dtheta: &[f64; 14]) {
+        for (y, th) in self.y.iter_mut().zip(&self.base.theta) {
+            for (j, d) in dtheta.iter().enumerate() {
+                for r in 0..NR {
+                    y[r] -= d * th[j][r];
+                }
+            }
+        }
     }
 
     /// The rate fitted on the rows after the warm-up (least squares on the rate column).

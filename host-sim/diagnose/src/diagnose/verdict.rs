@@ -1,5 +1,7 @@
 //! Stage 4, the verdict. `none`: nothing closes at least [`GAP_MIN`] of the held-out
-//! baseline energy. An effect: the best candidate is significant and closes at least
+//! baseline energy (of the calibrated model) and that residual is at the record's own noise
+//! (at most [`NONE_NOISE_MAX`] × its noise per row), unless the parameter face names an
+//! effect (anisodamping against a rate table). An effect: the best candidate is significant and closes at least
 //! [`SHARE_MIN`] of what the floor closes, and it (with a second effect on top, if one adds
 //! at least [`SECOND_MIN`]) leaves at most [`UNEXPLAINED_MAX`] of the gap above the noise,
 //! and no row holding a share of the gap mostly unexplained. `unknown`: a gap no library
@@ -11,14 +13,15 @@ use std::str::FromStr;
 use paragyro_simulator::effects::Effect;
 use serde::{Deserialize, Serialize};
 
+use super::calibrate::ParameterFace;
 use super::columns::Columns;
 use super::lsq::{Fit, row_energy};
 use super::rank::Fits;
 use super::report::Candidate;
 use super::rows::{Rows, Spans};
 use super::{
-    GAP_MIN, NOISE_ROW_ENERGY, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX, SECOND_MIN,
-    SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    GAP_MIN, NOISE_ROW_ENERGY, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX,
+    SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
 };
 
 /// A one-word answer: `none`, `unknown` or an effect's name (report.json's `verdict` and
@@ -184,6 +187,8 @@ pub(crate) struct Decision {
     /// Held-out gap above the floor, before and after the verdict's effect(s).
     pub gap_before: f64,
     pub gap_after: f64,
+    /// Held-out baseline energy per row over the record's own noise per row.
+    pub residual_over_noise: f64,
 }
 
 /// Decides the verdict from the ranking.
@@ -193,11 +198,25 @@ pub(crate) fn decide(
     spans: &Spans,
     fits: &Fits,
     ranking: &[Candidate],
+    face: &ParameterFace,
 ) -> Decision {
     let (e0, explainable) = (fits.e0, fits.explainable);
     let gap_fraction = if e0 > 0.0 { explainable / e0 } else { 0.0 };
+    // the record's own noise per row (its noise energy ratio × the rows' at unit density)
+    let noise_row = NOISE_ROW_ENERGY * face.noise_energy_ratio;
+    let hold_rows = fits.bank.hold.rows.max(1) as f64;
+    let residual_over_noise = e0 / hold_rows / noise_row;
+    // a parameter-face effect the calibration names (anisodamping against a rate table)
+    let face_named = face
+        .hypotheses
+        .iter()
+        .find(|h| h.status == "named")
+        .and_then(|h| h.name.parse::<Effect>().ok());
     let closest = match ranking.first() {
-        _ if gap_fraction < GAP_MIN => Answer::None,
+        _ if gap_fraction < GAP_MIN && residual_over_noise <= NONE_NOISE_MAX => {
+            face_named.map_or(Answer::None, Answer::Effect)
+        }
+        _ if gap_fraction < GAP_MIN => Answer::Unknown,
         Some(b) if b.significant && b.gap_closure >= SHARE_MIN => Answer::Effect(b.effect),
         _ => Answer::Unknown,
     };
@@ -216,7 +235,7 @@ pub(crate) fn decide(
         .collect();
     let after_fit = fits.bank.fit(&cols.with(&verdict_cols));
     // the verdict must explain the gap above the noise, not just most of what the floor does
-    let noise_e = NOISE_ROW_ENERGY * fits.bank.hold.rows as f64;
+    let noise_e = noise_row * hold_rows;
     let unexplained = if e0 > noise_e {
         ((after_fit.e_hold - noise_e) / (e0 - noise_e)).max(0.0)
     } else {
@@ -235,6 +254,7 @@ pub(crate) fn decide(
         (verdict, verdict_cols, after_fit)
     };
     Decision {
+        residual_over_noise,
         gap_after: (after_fit.e_hold - fits.e_floor).max(0.0),
         gap_before: explainable,
         verdict,
