@@ -9,6 +9,7 @@ pub mod check;
 pub mod demo;
 pub mod diagnose;
 pub mod effects;
+pub mod faults;
 pub mod list;
 pub mod paper001;
 pub mod paper_claims;
