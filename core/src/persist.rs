@@ -58,6 +58,8 @@ pub struct Snapshot {
 pub enum SnapshotError {
     /// There is no record (empty store).
     Missing,
+    /// The store could not be read (a flash error).
+    Unreadable,
     /// Fewer than [`SNAPSHOT_LEN`] bytes.
     Short,
     /// Not a snapshot (magic or length field wrong).

@@ -26,6 +26,7 @@
 
 pub mod app;
 pub mod drivers;
+pub mod persist;
 pub mod replay;
 pub mod run;
 pub mod table;
