@@ -19,6 +19,7 @@
 //!              [--precision f32|f64]                   estimates.csv, summary.json
 //! paragyro-sim faults --ticks N --out DIR             the fault campaign: faults.json, faults.md
 //!              [--seed N] [--class a,b]
+//! paragyro-sim soak [--hours H] --out DIR             the soak benchmark: soak.json, soak.md
 //! ```
 //!
 //! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
@@ -84,6 +85,9 @@ enum Command {
     /// Fault campaign: every fault class injected into the f32 core's closed loop, scored;
     /// writes DIR/faults.json and DIR/faults.md.
     Faults(cmd::faults::Args),
+    /// Soak benchmark: hours of the f32 core with the dither off after convergence, and
+    /// on; writes DIR/soak.json and DIR/soak.md.
+    Soak(cmd::soak::Args),
 }
 
 fn main() -> ExitCode {
@@ -130,6 +134,7 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Replay(a) => replay::exec(a, ctx),
         Command::Demo(a) => demo::exec(a, ctx),
         Command::Faults(a) => faults::exec(a, ctx),
+        Command::Soak(a) => soak::exec(a, ctx),
     }
 }
 

@@ -18,6 +18,7 @@ pub mod record;
 pub mod replay;
 pub mod results;
 pub mod run;
+pub mod soak;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

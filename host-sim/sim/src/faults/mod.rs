@@ -19,6 +19,7 @@
 
 mod class;
 mod inject;
+pub mod soak;
 pub mod warm;
 #[cfg(test)]
 mod tests;
