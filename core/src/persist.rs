@@ -263,7 +263,8 @@ impl<T: Real> Estimator<T> {
         let p = |tr: f64, n: f64| T::from_f64((tr / n).clamp(WARM_P_MIN, p_reset.max(WARM_P_MIN)));
         st.rls1.reset_covariance(p(snap.traces[0], 8.0));
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
-        st.sched.jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
+        st.sched
+            .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
         Ok(())
     }
 

@@ -165,7 +165,10 @@ impl<F: NorFlash> Store<F> {
             let (snap_b, _) = rest.split_at_mut(SNAPSHOT_LEN);
             snap_b.copy_from_slice(&body);
         }
-        let crc = rec.get(..RECORD_LEN.saturating_sub(4)).map(crc32).unwrap_or(0);
+        let crc = rec
+            .get(..RECORD_LEN.saturating_sub(4))
+            .map(crc32)
+            .unwrap_or(0);
         if let Some(tail) = rec.get_mut(RECORD_LEN.saturating_sub(4)..) {
             tail.copy_from_slice(&crc.to_le_bytes());
         }

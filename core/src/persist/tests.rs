@@ -44,7 +44,10 @@ fn every_single_bit_flip_and_truncation_is_refused() {
     for i in 0..SNAPSHOT_LEN * 8 {
         let mut b = bytes;
         b[i / 8] ^= 1 << (i % 8);
-        assert!(Snapshot::decode(&b).is_err(), "bit {i} flipped and accepted");
+        assert!(
+            Snapshot::decode(&b).is_err(),
+            "bit {i} flipped and accepted"
+        );
     }
     assert_eq!(
         Snapshot::decode(&bytes[..SNAPSHOT_LEN - 1]),
@@ -70,7 +73,10 @@ fn warm_start_restores_theta_and_pump_centre() {
     assert!((est.initial_pump_hz() - s.pump_centre_hz).abs() < 1e-6);
     // the covariance restarts at the stored trace per parameter
     let (tr1, tr2) = est.traces();
-    assert!((tr1 - 8e-6).abs() < 1e-9 && (tr2 - 6e-6).abs() < 1e-9, "{tr1} {tr2}");
+    assert!(
+        (tr1 - 8e-6).abs() < 1e-9 && (tr2 - 6e-6).abs() < 1e-9,
+        "{tr1} {tr2}"
+    );
 }
 
 #[test]

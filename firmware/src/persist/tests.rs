@@ -84,7 +84,7 @@ impl NorFlash for SimFlash {
     const WRITE_SIZE: usize = 4;
     const ERASE_SIZE: usize = ERASE;
     fn erase(&mut self, from: u32, to: u32) -> Result<(), PowerLoss> {
-        assert!(from as usize % ERASE == 0 && to as usize % ERASE == 0);
+        assert!((from as usize).is_multiple_of(ERASE) && (to as usize).is_multiple_of(ERASE));
         for i in from as usize..to as usize {
             if !self.spend() {
                 return Err(PowerLoss);
@@ -94,7 +94,7 @@ impl NorFlash for SimFlash {
         Ok(())
     }
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), PowerLoss> {
-        assert!(offset as usize % 4 == 0 && bytes.len() % 4 == 0);
+        assert!((offset as usize).is_multiple_of(4) && bytes.len().is_multiple_of(4));
         for (i, b) in bytes.iter().enumerate() {
             if !self.spend() {
                 // the byte being programmed when the power went: half its bits
@@ -130,14 +130,23 @@ fn store(flash: SimFlash) -> Store<SimFlash> {
 fn layout_is_checked() {
     let f = || SimFlash::new(4 * ERASE);
     assert!(Store::new(f(), 0, ERASE as u32, ERASE as u32).is_ok());
-    assert_eq!(Store::new(f(), 0, 0, ERASE as u32).err(), Some(StoreError::Layout));
-    assert_eq!(Store::new(f(), 0, 100, ERASE as u32).err(), Some(StoreError::Layout));
-    assert_eq!(Store::new(f(), 0, ERASE as u32, 128).err(), Some(StoreError::Layout));
+    assert_eq!(
+        Store::new(f(), 0, 0, ERASE as u32).err(),
+        Some(StoreError::Layout)
+    );
+    assert_eq!(
+        Store::new(f(), 0, 100, ERASE as u32).err(),
+        Some(StoreError::Layout)
+    );
+    assert_eq!(
+        Store::new(f(), 0, ERASE as u32, 128).err(),
+        Some(StoreError::Layout)
+    );
     assert_eq!(
         Store::new(f(), 0, 3 * ERASE as u32, 2 * ERASE as u32).err(),
         Some(StoreError::Layout)
     );
-    assert_eq!(RECORD_LEN % 4, 0);
+    assert!(RECORD_LEN.is_multiple_of(4));
 }
 
 #[test]
@@ -182,7 +191,11 @@ fn power_loss_at_every_byte_of_a_save_never_loses_the_previous_record() {
             assert_eq!((r.seq, got), (3, snapshot(3)), "cut {cut}");
         } else {
             torn_seen += 1;
-            assert_eq!((r.seq, got), (2, snapshot(2)), "cut {cut}: previous record lost");
+            assert_eq!(
+                (r.seq, got),
+                (2, snapshot(2)),
+                "cut {cut}: previous record lost"
+            );
         }
         // the boot hook starts warm from whichever record survived
         let mut est = Config::table2().build::<f32>().unwrap();

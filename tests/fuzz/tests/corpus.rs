@@ -20,8 +20,20 @@ impl Rng {
 }
 
 const TOKENS: [&[u8]; 14] = [
-    b"nan", b"inf", b"-inf", b"1e309", b"-0", b"0", b"1e-320", b"\"", b"[", b"]]",
-    b"\n", b",", b"=", b"# format: paragyro-record 1\n",
+    b"nan",
+    b"inf",
+    b"-inf",
+    b"1e309",
+    b"-0",
+    b"0",
+    b"1e-320",
+    b"\"",
+    b"[",
+    b"]]",
+    b"\n",
+    b",",
+    b"=",
+    b"# format: paragyro-record 1\n",
 ];
 
 /// One seeded mutation of `seed`.
@@ -76,7 +88,8 @@ fn regressions(target: &str) -> Vec<Vec<u8>> {
     let Ok(rd) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
-    rd.filter_map(|e| std::fs::read(e.ok()?.path()).ok()).collect()
+    rd.filter_map(|e| std::fs::read(e.ok()?.path()).ok())
+        .collect()
 }
 
 fn record_seed() -> Vec<u8> {

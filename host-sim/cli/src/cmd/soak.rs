@@ -60,5 +60,9 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     std::fs::write(&md, &table)
         .with_context(|| format!("cannot write {}", md.display()))
         .map_err(fail(EXIT_RUN))?;
-    ctx.say(&format!("Wrote {} and {}\n{table}", json.display(), md.display()))
+    ctx.say(&format!(
+        "Wrote {} and {}\n{table}",
+        json.display(),
+        md.display()
+    ))
 }

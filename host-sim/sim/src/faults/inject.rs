@@ -181,14 +181,7 @@ impl Injector {
     }
 
     /// The score of tick `k` after the core's step (`stepped`: the core saw the sample).
-    fn score(
-        &mut self,
-        k: u64,
-        est: &Estimator<f32>,
-        out: &StepOutput,
-        stepped: bool,
-        held: bool,
-    ) {
+    fn score(&mut self, k: u64, est: &Estimator<f32>, out: &StepOutput, stepped: bool, held: bool) {
         let wy2 = est.wy2();
         let rate = est.rate_dps();
         let (t1, t2) = est.theta();
@@ -280,12 +273,20 @@ fn set_channel(s: &mut Sample<f32>, c: usize, v: f32) {
         0 => l.x0_um = v,
         1..=6 => {
             let z = &mut l.x_um[(c - 1) / 2];
-            if (c - 1) % 2 == 0 { z.re = v } else { z.im = v }
+            if (c - 1).is_multiple_of(2) {
+                z.re = v
+            } else {
+                z.im = v
+            }
         }
         7 => l.y0_um = v,
         8..=13 => {
             let z = &mut l.y_um[(c - 8) / 2];
-            if (c - 8) % 2 == 0 { z.re = v } else { z.im = v }
+            if (c - 8).is_multiple_of(2) {
+                z.re = v
+            } else {
+                z.im = v
+            }
         }
         _ => s.accel_mps2[(c - 14).min(1)] = v,
     }

@@ -20,9 +20,9 @@
 mod class;
 mod inject;
 pub mod soak;
-pub mod warm;
 #[cfg(test)]
 mod tests;
+pub mod warm;
 
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};

@@ -61,7 +61,13 @@ pub struct SoakReport {
 }
 
 /// One soak run: `converge_s` with the dither, then `soak_s` with it on or off.
-pub fn soak(dither: bool, converge_s: f64, soak_s: f64, window_s: f64, seed: u64) -> Result<SoakReport> {
+pub fn soak(
+    dither: bool,
+    converge_s: f64,
+    soak_s: f64,
+    window_s: f64,
+    seed: u64,
+) -> Result<SoakReport> {
     let mut sc = Scenario::builtin("identify").context("the built-in 'identify' is missing")?;
     sc.duration_s = converge_s + soak_s;
     if !dither {
@@ -120,7 +126,7 @@ pub fn soak(dither: bool, converge_s: f64, soak_s: f64, window_s: f64, seed: u64
             for j in 0..14 {
                 let d = (th[j] - c[j]).abs() / c[j].abs().max(1e-30);
                 rep.theta_rel_dev_max[j] = rep.theta_rel_dev_max[j].max(d);
-                if !(d <= rep.theta_max_rel_dev) {
+                if d.is_nan() || d > rep.theta_max_rel_dev {
                     rep.theta_max_rel_dev = d;
                     rep.theta_max_rel_dev_index = j;
                 }
@@ -149,7 +155,8 @@ pub fn soak(dither: bool, converge_s: f64, soak_s: f64, window_s: f64, seed: u64
     )?;
     let c0 = conv.map(|c| c.2).unwrap_or_default();
     let c = est.counters();
-    rep.resets = (c.resets_drive + c.resets_sense).saturating_sub(c0.resets_drive + c0.resets_sense);
+    rep.resets =
+        (c.resets_drive + c.resets_sense).saturating_sub(c0.resets_drive + c0.resets_sense);
     rep.bad_samples = c.bad_samples;
     rep.updates = c.updates;
     rep.rate_err_first_dps = first.0 / first.1.max(1) as f64;
@@ -160,7 +167,12 @@ pub fn soak(dither: bool, converge_s: f64, soak_s: f64, window_s: f64, seed: u64
 }
 
 /// Both soaks (dither off, dither on) in parallel, in that order.
-pub fn soak_both(converge_s: f64, soak_s: f64, window_s: f64, seed: u64) -> Result<Vec<SoakReport>> {
+pub fn soak_both(
+    converge_s: f64,
+    soak_s: f64,
+    window_s: f64,
+    seed: u64,
+) -> Result<Vec<SoakReport>> {
     crate::par::try_map(
         &[false, true],
         |d| format!("soak with the dither {}", if *d { "on" } else { "off" }),

@@ -12,7 +12,12 @@ fn plan_is_seeded_inside_its_slots_and_in_range() {
     };
     for class in FaultClass::ALL {
         let a = plan(class, &sched, 7);
-        assert_eq!(a, plan(class, &sched, 7), "{}: not reproducible", class.name());
+        assert_eq!(
+            a,
+            plan(class, &sched, 7),
+            "{}: not reproducible",
+            class.name()
+        );
         assert_ne!(a, plan(class, &sched, 8), "{}: seed ignored", class.name());
         assert_eq!(a.len(), 19);
         for (i, e) in a.iter().enumerate() {
@@ -54,7 +59,15 @@ fn small_campaign_no_panic_no_non_finite_flags_raised() {
         }
     }
     // the value faults reach the input check: the core counted bad samples
-    for name in ["nan", "inf", "saturation", "stuck", "spi_crc", "drdy_missing", "accel_lost"] {
+    for name in [
+        "nan",
+        "inf",
+        "saturation",
+        "stuck",
+        "spi_crc",
+        "drdy_missing",
+        "accel_lost",
+    ] {
         let c = rep.classes.iter().find(|c| c.class == name).unwrap();
         assert!(c.bad_samples > 0, "{name}: no bad sample counted");
         assert_eq!(c.flagged, 1.0, "{name}: an episode went unflagged");

@@ -141,7 +141,10 @@ mod tests {
         let (cold, warm) = (r.cold.converged_s.unwrap(), r.warm.converged_s.unwrap());
         assert!(cold > 0.5, "the cold boot converged at once: {r:?}");
         assert!(warm <= 0.25 * cold, "{r:?}");
-        assert!(r.warm.settled_s.unwrap() < r.cold.settled_s.unwrap(), "{r:?}");
+        assert!(
+            r.warm.settled_s.unwrap() < r.cold.settled_s.unwrap(),
+            "{r:?}"
+        );
     }
 
     #[test]
