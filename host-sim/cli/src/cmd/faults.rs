@@ -92,3 +92,35 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         md.display()
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_class_and_short_run_are_refused_before_any_work() {
+        let dir = std::env::temp_dir().join(format!("paragyro-faults-{}", std::process::id()));
+        let args = |class: Vec<String>, ticks| Args {
+            ticks,
+            out: dir.clone(),
+            seed: 1,
+            class,
+            warmup: 5000,
+            slot: 5000,
+        };
+        let mut out = Vec::new();
+        let mut ctx = Ctx {
+            out: &mut out,
+            progress_ok: false,
+        };
+        let e = exec(args(vec!["nan".into(), "bogus".into()], 100_000), &mut ctx)
+            .err()
+            .unwrap();
+        assert_eq!(e.code, EXIT_LOAD);
+        assert!(format!("{:#}", e.error).contains("unknown fault class 'bogus'"));
+        let e = exec(args(vec![], 6000), &mut ctx).err().unwrap();
+        assert_eq!(e.code, EXIT_RUN);
+        assert!(format!("{:#}", e.error).contains("shorter than the warm-up"));
+        assert!(!dir.exists(), "nothing written on an error");
+    }
+}
