@@ -85,6 +85,12 @@ impl<T: Real> Estimator<T> {
         self.state.reset(&self.design);
     }
 
+    /// The design and the state, for the crate's own extensions of the estimator
+    /// (`persist`: the warm start) that live outside this module.
+    pub(crate) fn parts_mut(&mut self) -> (&Design<T>, &mut State<T>) {
+        (&self.design, &mut self.state)
+    }
+
     /// Processes one 500 Hz sample. Never fails, never panics, never allocates.
     #[inline(never)]
     pub fn step(&mut self, s: &Sample<T>) -> StepOutput {

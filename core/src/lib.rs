@@ -22,6 +22,7 @@
 //! | [`monitor`] | input checks, change detector, excitation, settle test |
 //! | [`excitation`], [`retune`] | pump scheduler (dither, ramps), retune supervisor |
 //! | [`health`], [`output`] | [`Health`], [`Counters`], [`StepOutput`] and its events |
+//! | [`persist`] | warm start: the converged estimate as a versioned, CRC-checked snapshot |
 //! | [`estimator`] | the design, the state and the one `step()` that ties the stages |
 #![no_std]
 #![forbid(unsafe_code)]
@@ -38,6 +39,7 @@ pub mod health;
 pub mod lpf;
 pub mod monitor;
 pub mod output;
+pub mod persist;
 pub mod physics;
 pub mod real;
 pub mod retune;

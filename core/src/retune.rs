@@ -248,7 +248,7 @@ impl<T: Real> Supervisor<T> {
             + 1;
         let len = self.ramp_min.max(by_rate);
         self.ramping = Some((i.k, len, i.centre_om));
-        self.retunes += 1;
+        self.retunes = self.retunes.saturating_add(1);
         self.last_target = target;
         RetuneAction::Start {
             target_om: target,

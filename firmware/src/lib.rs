@@ -30,6 +30,7 @@
 pub mod app;
 pub mod drivers;
 pub mod fil;
+pub mod persist;
 pub mod replay;
 pub mod run;
 pub mod table;

@@ -239,7 +239,7 @@ impl<T: Real> State<T> {
             self.change_pending = true;
             self.settle.clear();
             self.lift_trace_bound(d);
-            self.counters.jumps += 1;
+            Counters::bump(&mut self.counters.jumps, 1);
         } else {
             let len = libm::round(d.cfg.retune.ramp_s * d.cfg.fs_hz).max(1.0) as u64;
             self.sched.ramp_to(dev, self.k, len);
@@ -323,7 +323,7 @@ impl<T: Real> State<T> {
         self.lin.move_to(t1, t2);
         self.rls1.set_estimate([T::ZERO; 8]);
         self.rls2.set_estimate([T::ZERO; 6]);
-        self.lin.relins += 1;
+        self.lin.relins = self.lin.relins.saturating_add(1);
     }
 
     /// After a covariance reset the converged trace of the old regime means nothing:

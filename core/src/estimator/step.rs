@@ -14,7 +14,7 @@
 
 use super::design::{DECIDE_EVERY, Design};
 use super::state::{Conditioned, Replicas, State};
-use crate::health::Health;
+use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
 use crate::monitor::InputCheck;
 use crate::output::{StepOutput, event};
@@ -84,10 +84,10 @@ impl<T: Real> State<T> {
                 pump_scale: s.pump_scale,
             });
         } else {
-            self.counters.bad_samples += 1;
-            self.counters.non_finite += chk.non_finite as u32;
-            self.counters.saturated += chk.saturated as u32;
-            self.counters.stuck += chk.stuck as u32;
+            Counters::bump(&mut self.counters.bad_samples, 1);
+            Counters::bump(&mut self.counters.non_finite, chk.non_finite as u32);
+            Counters::bump(&mut self.counters.saturated, chk.saturated as u32);
+            Counters::bump(&mut self.counters.stuck, chk.stuck as u32);
             self.bad_gate_until = self.k + d.watch.gate_bad + 1;
             *events |= event::BAD_INPUT;
         }
@@ -154,7 +154,7 @@ impl<T: Real> State<T> {
     #[inline(always)]
     fn update(&mut self, d: &Design<T>, k: u64, events: &mut u8) {
         let f = &d.fit;
-        self.counters.updates += 1;
+        Counters::bump(&mut self.counters.updates, 1);
         self.rls1.begin_sample();
         self.rls2.begin_sample();
         let rows = &self.last_rows;
@@ -174,12 +174,12 @@ impl<T: Real> State<T> {
         let p = f.p_reset;
         if self.det1.push(&f.change, k, sum1) {
             self.rls1.reset_covariance(p);
-            self.counters.resets_drive += 1;
+            Counters::bump(&mut self.counters.resets_drive, 1);
             *events |= event::CHANGE_DRIVE;
         }
         if self.det2.push(&f.change, k, sum2) {
             self.rls2.reset_covariance(p);
-            self.counters.resets_sense += 1;
+            Counters::bump(&mut self.counters.resets_sense, 1);
             *events |= event::CHANGE_SENSE;
         }
         if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
@@ -315,12 +315,12 @@ impl<T: Real> State<T> {
         match act {
             RetuneAction::Start { target_om, len } => {
                 self.sched.ramp_to(target_om - om_ref, k + 1, len);
-                self.counters.retunes += 1;
+                Counters::bump(&mut self.counters.retunes, 1);
                 *events |= event::RETUNE_START;
             }
             RetuneAction::Abort { back_to_om, len } => {
                 self.sched.ramp_to(back_to_om - om_ref, k + 1, len);
-                self.counters.retune_aborts += 1;
+                Counters::bump(&mut self.counters.retune_aborts, 1);
                 *events |= event::RETUNE_ABORT;
             }
             RetuneAction::None => {

@@ -17,6 +17,9 @@
 //!              --out FILE.csv [--seed N]               and its truth, FILE.truth.json
 //! paragyro-sim replay FILE.csv --out DIR              the core open-loop on a record:
 //!              [--precision f32|f64]                   estimates.csv, summary.json
+//! paragyro-sim faults --ticks N --out DIR             the fault campaign: faults.json, faults.md
+//!              [--seed N] [--class a,b]
+//! paragyro-sim soak [--hours H] --out DIR             the soak benchmark: soak.json, soak.md
 //! ```
 //!
 //! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
@@ -79,6 +82,12 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
     Demo(cmd::demo::Args),
+    /// Fault campaign: every fault class injected into the f32 core's closed loop, scored;
+    /// writes DIR/faults.json and DIR/faults.md.
+    Faults(cmd::faults::Args),
+    /// Soak benchmark: hours of the f32 core with the dither off after convergence, and
+    /// on; writes DIR/soak.json and DIR/soak.md.
+    Soak(cmd::soak::Args),
 }
 
 fn main() -> ExitCode {
@@ -124,6 +133,8 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Diagnose(a) => diagnose::exec(a, ctx),
         Command::Replay(a) => replay::exec(a, ctx),
         Command::Demo(a) => demo::exec(a, ctx),
+        Command::Faults(a) => faults::exec(a, ctx),
+        Command::Soak(a) => soak::exec(a, ctx),
     }
 }
 

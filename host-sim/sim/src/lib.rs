@@ -6,6 +6,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod effects;
+pub mod faults;
 pub mod located;
 pub mod lockin;
 pub mod par;

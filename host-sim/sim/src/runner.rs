@@ -219,6 +219,53 @@ pub fn closed_loop_with<T: Real>(
     seed: u64,
     dev: &Device,
     est: &mut Estimator<T>,
+    on_control: impl FnMut(&EventSpec),
+    visit: impl FnMut(&LoopSample<'_, T>),
+) -> anyhow::Result<()> {
+    closed_loop_hooked(sc, seed, dev, est, &mut NoHooks, on_control, visit)
+}
+
+/// Where a fault campaign ([`crate::faults`]) may tamper with the closed loop. Every
+/// method's default changes nothing (that is [`closed_loop_with`]).
+pub trait LoopHooks<T: Real> {
+    /// The plant in force over [t_k, t_{k+1}] (the truth: a parameter jump, a rate
+    /// beyond full scale).
+    fn plant(&mut self, _k: u64, _pa: &mut PlantAt) {}
+    /// The core's step on the sample of tick `k` (a hook may change the sample, drop it
+    /// by not stepping, or catch a panic); `last` is the previous tick's output.
+    fn step(
+        &mut self,
+        _k: u64,
+        est: &mut Estimator<T>,
+        sample: &mut Sample<T>,
+        _last: &StepOutput,
+    ) -> StepOutput {
+        est.step(sample)
+    }
+    /// The pump reaching the plant over [t_k, t_{k+1}], from `u0` to `u1` (a DDS write
+    /// failure, a pump-amplitude collapse); `next` is what the next sample reports as in
+    /// effect: the pump frequency, Hz, and the multiplier of the scenario's pump scale.
+    fn inputs(
+        &mut self,
+        _k: u64,
+        _u0: &mut PlantInputs,
+        _u1: &mut PlantInputs,
+        _next: &mut (f64, f64),
+    ) {
+    }
+}
+
+/// The hooks that change nothing.
+struct NoHooks;
+impl<T: Real> LoopHooks<T> for NoHooks {}
+
+/// [`closed_loop_with`] with [`LoopHooks`] between its stages (fault injection).
+pub fn closed_loop_hooked<T: Real>(
+    sc: &Scenario,
+    seed: u64,
+    dev: &Device,
+    est: &mut Estimator<T>,
+    hooks: &mut dyn LoopHooks<T>,
     mut on_control: impl FnMut(&EventSpec),
     mut visit: impl FnMut(&LoopSample<'_, T>),
 ) -> anyhow::Result<()> {
@@ -248,6 +295,11 @@ pub fn closed_loop_with<T: Real>(
     let mut pump_hz = est.initial_pump_hz();
     // the core's multiplier on the pump voltage scale (the amplitude part of the dither)
     let mut scale_mult = 1.0;
+    let mut last_out = StepOutput {
+        pump_hz_next: pump_hz,
+        pump_scale_next: 1.0,
+        ..StepOutput::default()
+    };
     for k in 0..=n {
         let t = k as f64 / fs;
         let t_next = (k + 1) as f64 / fs;
@@ -271,10 +323,11 @@ pub fn closed_loop_with<T: Real>(
             on_control(&e);
             next_ctrl += 1;
         }
-        let pa = sc.plant_at(t);
+        let mut pa = sc.plant_at(t);
+        hooks.plant(k, &mut pa);
         let s_k = sc.pump_scale_at(t) * scale_mult;
         let li = sim.lockin();
-        let sample = Sample {
+        let mut sample = Sample {
             lockin: li.to_precision::<T>(),
             accel_mps2: [
                 T::from_f64(pa.accel_x * accel_si),
@@ -284,7 +337,8 @@ pub fn closed_loop_with<T: Real>(
             pump_scale: T::from_f64(s_k),
         };
         let nominal_before = est.nominal_theta();
-        let out = est.step(&sample);
+        let out = hooks.step(k, est, &mut sample, &last_out);
+        last_out = out;
         visit(&LoopSample {
             k,
             t_s: t,
@@ -335,9 +389,11 @@ pub fn closed_loop_with<T: Real>(
                 ..u1
             },
         };
+        let (mut u0, mut u1) = (u0, u1);
+        let mut next = (out.pump_hz_next, out.pump_scale_next);
+        hooks.inputs(k, &mut u0, &mut u1, &mut next);
         sim.advance(&theta, &u0, &u1);
-        pump_hz = out.pump_hz_next;
-        scale_mult = out.pump_scale_next;
+        (pump_hz, scale_mult) = next;
     }
     Ok(())
 }

@@ -56,6 +56,7 @@ fn main() -> ExitCode {
 fn usage() -> &'static str {
     "usage: cargo xtask <task>\n\
      \x20 test [--no-install] [CARGO TEST ARGS]   install what the tests need, then `cargo test --workspace`\n\
+     \x20                                         and the fuzz corpus run (tests/fuzz)\n\
      \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print)"
 }
 
@@ -133,7 +134,27 @@ fn test(args: &[String]) -> Result<(), String> {
     all.extend(args.iter().cloned());
     let refs: Vec<&str> = all.iter().map(String::as_str).collect();
     say(&format!("cargo {}", refs.join(" ")));
-    run(&cargo(), &refs)
+    run(&cargo(), &refs)?;
+    // the fuzz harnesses over their corpus (tests/fuzz is its own workspace; bounded,
+    // stable, no libFuzzer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
+    if args.is_empty() && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let manifest = root.join("tests/fuzz/Cargo.toml");
+        let target = root.join("target/fuzz");
+        let (manifest, target) = (manifest.to_string_lossy(), target.to_string_lossy());
+        let fuzz = [
+            "test",
+            "--release",
+            "--locked",
+            "--manifest-path",
+            &manifest,
+            "--target-dir",
+            &target,
+        ];
+        say(&format!("cargo {}", fuzz.join(" ")));
+        run(&cargo(), &fuzz)?;
+    }
+    Ok(())
 }
 
 fn cargo() -> String {

@@ -9,6 +9,7 @@ pub mod check;
 pub mod demo;
 pub mod diagnose;
 pub mod effects;
+pub mod faults;
 pub mod list;
 pub mod paper001;
 pub mod paper_claims;
@@ -17,6 +18,7 @@ pub mod record;
 pub mod replay;
 pub mod results;
 pub mod run;
+pub mod soak;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -1,0 +1,147 @@
+//! The snapshot codec and the warm start.
+
+extern crate std;
+use super::*;
+use crate::config::Config;
+
+fn settled_snapshot(est: &Estimator<f32>) -> Snapshot {
+    let (t1, t2) = theta_from_physical(&est.config().nominal);
+    let mut t1s = t1;
+    t1s[1] *= 1.01; // a learned value, not the design's
+    Snapshot {
+        config_crc: config_crc(est.config()),
+        health_bits: SETTLED_BIT | 1,
+        theta1: t1s,
+        theta2: t2,
+        pump_centre_hz: est.pump_centre_hz() + 3.0,
+        traces: [8e-6, 6e-6],
+    }
+}
+
+#[test]
+fn crc32_matches_the_standard_check_value() {
+    assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    assert_eq!(crc32(b""), 0);
+}
+
+#[test]
+fn encode_decode_round_trip_bit_exact() {
+    let est = Config::table2().build::<f32>().unwrap();
+    let s = settled_snapshot(&est);
+    let bytes = s.encode();
+    assert_eq!(&bytes[..4], b"PGWS");
+    assert_eq!(Snapshot::decode(&bytes), Ok(s));
+    // a longer buffer (a flash slot) reads its first SNAPSHOT_LEN bytes
+    let mut long = [0xFFu8; 300];
+    long[..SNAPSHOT_LEN].copy_from_slice(&bytes);
+    assert_eq!(Snapshot::decode(&long), Ok(s));
+}
+
+#[test]
+fn every_single_bit_flip_and_truncation_is_refused() {
+    let est = Config::table2().build::<f32>().unwrap();
+    let bytes = settled_snapshot(&est).encode();
+    for i in 0..SNAPSHOT_LEN * 8 {
+        let mut b = bytes;
+        b[i / 8] ^= 1 << (i % 8);
+        assert!(
+            Snapshot::decode(&b).is_err(),
+            "bit {i} flipped and accepted"
+        );
+    }
+    assert_eq!(
+        Snapshot::decode(&bytes[..SNAPSHOT_LEN - 1]),
+        Err(SnapshotError::Short)
+    );
+    assert_eq!(
+        Snapshot::decode(&[0xFF; SNAPSHOT_LEN]),
+        Err(SnapshotError::Magic)
+    );
+    let mut v2 = bytes;
+    v2[4] = 2;
+    assert_eq!(Snapshot::decode(&v2), Err(SnapshotError::Version(2)));
+}
+
+#[test]
+fn warm_start_restores_theta_and_pump_centre() {
+    let mut est = Config::table2().build::<f32>().unwrap();
+    let s = settled_snapshot(&est);
+    assert_eq!(est.boot_from(Some(&s.encode())), Start::Warm);
+    let (t1, t2) = est.theta();
+    assert_eq!((t1, t2), (s.theta1, s.theta2));
+    assert!((est.pump_centre_hz() - s.pump_centre_hz).abs() < 1e-6);
+    assert!((est.initial_pump_hz() - s.pump_centre_hz).abs() < 1e-6);
+    // the covariance restarts at the stored trace per parameter
+    let (tr1, tr2) = est.traces();
+    assert!(
+        (tr1 - 8e-6).abs() < 1e-9 && (tr2 - 6e-6).abs() < 1e-9,
+        "{tr1} {tr2}"
+    );
+}
+
+#[test]
+fn unusable_records_leave_the_design_with_a_flag() {
+    let cfg = Config::table2();
+    let fresh = cfg.build::<f32>().unwrap();
+    let design = fresh.theta();
+    let s = settled_snapshot(&fresh);
+    let cold = |rec: Option<&[u8]>| {
+        let mut est = cfg.build::<f32>().unwrap();
+        let start = est.boot_from(rec);
+        assert_eq!(est.theta(), design, "{start:?}: the design was changed");
+        assert_eq!(est.pump_centre_hz(), fresh.pump_centre_hz());
+        start
+    };
+    assert_eq!(cold(None), Start::Cold(SnapshotError::Missing));
+    let mut torn = s.encode();
+    torn[40] ^= 0x10;
+    assert_eq!(cold(Some(&torn)), Start::Cold(SnapshotError::Crc));
+    assert_eq!(cold(Some(&[0u8; 10])), Start::Cold(SnapshotError::Short));
+    let foreign = Snapshot {
+        config_crc: s.config_crc ^ 1,
+        ..s
+    };
+    assert_eq!(
+        cold(Some(&foreign.encode())),
+        Start::Cold(SnapshotError::Config)
+    );
+    let unsettled = Snapshot {
+        health_bits: 1,
+        ..s
+    };
+    let mut nan = s;
+    nan.theta2[1] = f64::NAN;
+    let mut far = s;
+    far.pump_centre_hz *= 1.2;
+    let mut wild = s;
+    wild.theta1[0] *= 10.0;
+    for bad in [unsettled, nan, far, wild] {
+        assert_eq!(
+            cold(Some(&bad.encode())),
+            Start::Cold(SnapshotError::Implausible)
+        );
+    }
+    // another configuration's estimator refuses this one's snapshot
+    let mut other = cfg;
+    other.pump_centre_hz += 10.0;
+    let mut est = other.build::<f32>().unwrap();
+    assert_eq!(
+        est.boot_from(Some(&s.encode())),
+        Start::Cold(SnapshotError::Config)
+    );
+}
+
+#[test]
+fn snapshot_of_an_estimator_is_what_it_holds() {
+    let est = Config::table2().build::<f64>().unwrap();
+    let s = est.snapshot();
+    assert_eq!((s.theta1, s.theta2), est.theta());
+    assert_eq!(s.pump_centre_hz, est.pump_centre_hz());
+    assert_eq!(s.health_bits, est.health().bits());
+    // not settled: refused at boot
+    let mut e2 = Config::table2().build::<f64>().unwrap();
+    assert_eq!(
+        e2.boot_from(Some(&s.encode())),
+        Start::Cold(SnapshotError::Implausible)
+    );
+}
