@@ -32,6 +32,10 @@ pub(crate) struct Relin<T> {
     t1: [f64; 8],
     t2: [f64; 6],
     nom: NominalConsts<T>,
+    /// θ14, θ22, θ24 of the new point in `T` (`Linearisation::move_to`'s conversions).
+    t14: T,
+    t22: T,
+    t24: T,
 }
 
 impl<T: Real> State<T> {
@@ -72,20 +76,31 @@ impl<T: Real> State<T> {
             2 => {
                 let p = &mut self.lin.pending;
                 p.nom = NominalConsts::new(&p.t1, &p.t2, d.units.om_ref);
+                p.t14 = T::from_f64(p.t1[3]);
+                p.t22 = T::from_f64(p.t2[1]);
+                p.t24 = T::from_f64(p.t2[3]);
                 p.phase = 3;
             }
             _ => {
-                let p = self.lin.pending;
-                self.lin.pending.phase = 0;
-                self.rows.relinearize_to(p.nom);
-                self.lin.move_to(p.t1, p.t2);
-                let x1 = self.rls1.estimate();
-                let x2 = self.rls2.estimate();
-                self.rls1
-                    .set_estimate(core::array::from_fn(|j| x1[j] - p.x1[j]));
-                self.rls2
-                    .set_estimate(core::array::from_fn(|j| x2[j] - p.x2[j]));
-                self.lin.relins += 1;
+                // by reference (the pending part is not copied on this tick)
+                let State {
+                    rows,
+                    lin,
+                    rls1,
+                    rls2,
+                    ..
+                } = self;
+                let p = &mut lin.pending;
+                p.phase = 0;
+                rows.relinearize_to(&p.nom);
+                // Linearisation::move_to, its conversions done on the tick before
+                (lin.th1n, lin.th2n) = (p.t1, p.t2);
+                (lin.th14n, lin.th22n, lin.th24n) = (p.t14, p.t22, p.t24);
+                let x1 = rls1.estimate();
+                let x2 = rls2.estimate();
+                rls1.set_estimate(core::array::from_fn(|j| x1[j] - p.x1[j]));
+                rls2.set_estimate(core::array::from_fn(|j| x2[j] - p.x2[j]));
+                lin.relins += 1;
             }
         }
     }
