@@ -313,8 +313,9 @@ impl<T: Real> ReplicaChannel<T> {
     ///
     /// The default order (4, `lockin_lpf_order`) runs a kernel written out for it (no
     /// loop, iterator or zeroing overhead on the tick path; the same operations in the
-    /// same order); any other order the loop below.
-    #[inline]
+    /// same order); any other order the loop below. Not inlined: one copy for the five
+    /// channels (the stm32f405 image's 64 KiB flash budget).
+    #[inline(never)]
     pub fn update(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) -> T {
         if coeffs.n == 4 {
             return self.update_4(coeffs, u);
