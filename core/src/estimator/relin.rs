@@ -105,3 +105,52 @@ impl<T: Real> State<T> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use crate::config::Config;
+
+    /// The four parts in order: nothing moves until the swap; at the swap θ_nom becomes
+    /// the trigger tick's estimate, the RLS keeps what it learnt since, and θ̂ = θ_nom +
+    /// sc·x is the same before and after (f64: to rounding).
+    #[test]
+    fn spread_relinearisation_keeps_theta_and_swaps_on_the_fourth_tick() {
+        let mut est = Config::table2().build::<f64>().unwrap();
+        let (d, s) = (&est.design, &mut est.state);
+        let every = d.fit.relin_every;
+        assert!(every > 0);
+        let x1: [f64; 8] = core::array::from_fn(|j| 0.01 * (j as f64 + 1.0));
+        let x2: [f64; 6] = core::array::from_fn(|j| -0.02 * (j as f64 + 1.0));
+        assert!(s.rls1.set_estimate(x1) && s.rls2.set_estimate(x2));
+        let k = s.lin.last_relin + every;
+        let (t1_trigger, t2_trigger) = s.theta(d);
+        // not yet due, or not an updated tick: nothing starts
+        s.relin_tick(d, k - 1, true);
+        s.relin_tick(d, k, false);
+        assert_eq!(s.lin.pending.phase, 0);
+        s.relin_tick(d, k, true);
+        assert_eq!((s.lin.pending.phase, s.lin.last_relin), (1, k));
+        // the RLS moves on between trigger and swap
+        let mut x1b = x1;
+        x1b[3] += 0.005;
+        assert!(s.rls1.set_estimate(x1b));
+        s.relin_tick(d, k + 1, true);
+        s.relin_tick(d, k + 2, true);
+        assert_eq!(s.lin.pending.phase, 3);
+        assert_eq!(s.lin.relins, 0);
+        let (b1, b2) = s.theta(d);
+        s.relin_tick(d, k + 3, true);
+        assert_eq!((s.lin.pending.phase, s.lin.relins), (0, 1));
+        let (a1, a2) = s.theta(d);
+        for (b, a) in b1.iter().chain(b2.iter()).zip(a1.iter().chain(a2.iter())) {
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{b} → {a}");
+        }
+        // the new point is the trigger tick's estimate; x keeps only the later step
+        assert_eq!(s.lin.th1n, t1_trigger);
+        assert_eq!(s.lin.th2n, t2_trigger);
+        let x = s.rls1.estimate();
+        assert!((x[3] - 0.005).abs() < 1e-15 && x[0].abs() < 1e-15);
+        assert!(s.rls2.estimate().iter().all(|v| v.abs() < 1e-15));
+    }
+}
