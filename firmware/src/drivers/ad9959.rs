@@ -338,10 +338,13 @@ impl AmplitudeWord {
         let (mant, shift) = if exp == 0 {
             (frac, 149)
         } else {
-            (frac | 0x80_0000, 150 - exp)
+            (frac | 0x80_0000, 150u32.saturating_sub(exp))
         };
-        // floor(4v), v = 1023²·s: 4·1023²·mant < 2^46, shift ≥ 23 (s ≤ 1)
-        let four_v = (4 * u64::from(ASF_MAX) * u64::from(ASF_MAX) * mant)
+        // floor(4v), v = 1023²·s: 4·1023²·mant < 2^46 (never saturates), shift ≥ 23
+        // (s ≤ 1)
+        const FOUR_ASF_MAX_SQ: u64 = 4 * (ASF_MAX as u64) * (ASF_MAX as u64);
+        let four_v = FOUR_ASF_MAX_SQ
+            .saturating_mul(mant)
             .checked_shr(shift)
             .unwrap_or(0);
         // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)).
