@@ -20,6 +20,7 @@
 //! estimator-sized temporary on its stack.
 
 mod design;
+mod relin;
 mod state;
 mod step;
 #[cfg(test)]

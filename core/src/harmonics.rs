@@ -86,23 +86,28 @@ pub fn project<T: Real>(
     let [a1, a2, a3] = *a;
     let mut cube = [T::ZERO; 5]; // h0, h1 re, h1 im, h3 re, h3 im (sums)
     let mut cc = [T::ZERO; 5];
-    for j in 0..NSYN {
+    // half-period symmetry: at ψ_j + π the odd harmonics change sign, the even ones do
+    // not, so x = E ± O at the pair (j, j + N/2); the even sums (k = 0) take x₊³ + x₋³,
+    // the odd ones (k = 1, 3) x₊³ − x₋³ — half the points to synthesise and project
+    for j in 0..NSYN / 2 {
         let (c1, s1, c2, s2, c3, s3) = (tb.c1[j], tb.s1[j], tb.c2[j], tb.s2[j], tb.c3[j], tb.s3[j]);
-        let x =
-            x0 + (a1.re * c1 - a1.im * s1) + (a2.re * c2 - a2.im * s2) + (a3.re * c3 - a3.im * s3);
-        let x3 = x * x * x;
-        cube[0] += x3;
-        cube[1] += x3 * c1;
-        cube[2] -= x3 * s1;
-        cube[3] += x3 * c3;
-        cube[4] -= x3 * s3;
+        let even = x0 + (a2.re * c2 - a2.im * s2);
+        let odd = (a1.re * c1 - a1.im * s1) + (a3.re * c3 - a3.im * s3);
+        let (xp, xm) = (even + odd, even - odd);
+        let (p3, m3) = (xp * xp * xp, xm * xm * xm);
+        let (sum, dif) = (p3 + m3, p3 - m3);
+        cube[0] += sum;
+        cube[1] += dif * c1;
+        cube[2] -= dif * s1;
+        cube[3] += dif * c3;
+        cube[4] -= dif * s3;
         if with_pump {
-            let f = x3 * c2;
-            cc[0] += f;
-            cc[1] += f * c1;
-            cc[2] -= f * s1;
-            cc[3] += f * c3;
-            cc[4] -= f * s3;
+            let (fs, fd) = (sum * c2, dif * c2);
+            cc[0] += fs;
+            cc[1] += fd * c1;
+            cc[2] -= fd * s1;
+            cc[3] += fd * c3;
+            cc[4] -= fd * s3;
         }
     }
     let inv = T::from_f64(1.0 / NSYN as f64);

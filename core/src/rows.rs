@@ -221,7 +221,12 @@ impl<T: Real> RowBuilder<T> {
     /// coefficients, so the new state is the old one minus `Σ Δθ_j · state(g_j)`, exactly
     /// in exact arithmetic. The regressor columns are unchanged.
     pub fn relinearize(&mut self, th1: &[f64; 8], th2: &[f64; 6], om_ref: f64) {
-        let new = NominalConsts::<T>::new(th1, th2, om_ref);
+        self.relinearize_to(&NominalConsts::<T>::new(th1, th2, om_ref));
+    }
+
+    /// [`RowBuilder::relinearize`] to constants built beforehand (the estimator's spread
+    /// re-linearisation builds them on an earlier tick).
+    pub fn relinearize_to(&mut self, new: &NominalConsts<T>) {
         let mut d1 = [T::ZERO; 8];
         let mut d2 = [T::ZERO; 6];
         for j in 0..8 {
@@ -269,7 +274,7 @@ impl<T: Real> RowBuilder<T> {
             d.vy.axpy(-d2[4], &p25);
             d.vy.axpy(-d2[5], &ay);
         }
-        self.nom = new;
+        self.nom = *new;
     }
 
     /// Restarts the filters at the next sample (they start at rest at its values).

@@ -347,6 +347,9 @@ pub struct App<AX, AY, XL, DDS> {
     guard: PumpGuard,
     /// The guard as reference words: [`PumpGuard::plan`] of its ends.
     guard_words: (u32, u32),
+    /// Pump Hz per reference word, `2·f_SYSCLK / 2^32` (exact: a power-of-two scaling),
+    /// so that [`App::guard_plan`] needs one `f64` division and no multiplication.
+    hz_per_ref_word: f64,
     amplitude: PumpAmplitude,
     /// A lock-in value beyond the core's full scale (saturated codes), µm.
     lockin_beyond_um: f32,
@@ -562,6 +565,7 @@ where
             cal_y: LockinCalibration::UNITY,
             guard: PumpGuard::new(0.0, 0.0),
             guard_words: (0, 0),
+            hz_per_ref_word: 1.0,
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: 0.0,
             accel_beyond_mps2: 0.0,
@@ -599,6 +603,7 @@ where
         guard.validate(sysclk, cfg.initial_pump_hz())?;
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
+        self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
         self.est.rebuild(valid);
         self.cal_x = cal_x;
         self.cal_y = cal_y;
@@ -772,7 +777,9 @@ where
     /// give the lower guard word, huge ones the upper.
     fn guard_plan(&self, pump_hz: f64) -> Option<PumpPlan> {
         let sysclk = self.chips.dds.sysclk_hz();
-        let x = pump_hz * 0.5 * FTW_SCALE / sysclk;
+        // = pump_hz · 0.5 · 2^32 / sysclk bit for bit: both divide the same exact
+        // quotient's operands scaled by powers of two, rounded once
+        let x = pump_hz / self.hz_per_ref_word;
         // saturating cast: NaN and negatives give 0, overflow u32::MAX
         let k = (x + 0.5) as u32;
         let (lo, hi) = self.guard_words;

@@ -53,6 +53,8 @@ pub(crate) struct Linearisation<T> {
     /// Sample of the last re-linearisation and how many there were.
     pub last_relin: u64,
     pub relins: u32,
+    /// The spread re-linearisation in progress (`relin.rs`).
+    pub pending: super::relin::Relin<T>,
 }
 
 impl<T: Real> Linearisation<T> {
@@ -310,20 +312,6 @@ impl<T: Real> State<T> {
                 .estimate()
                 .iter()
                 .all(|v| v.is_finite() && v.abs() <= lim)
-    }
-
-    /// Moves the linearisation point θ_nom to the current estimate (δθ → 0). The
-    /// column scales stay those of the configured design, so P keeps its meaning.
-    pub fn relinearize(&mut self, d: &Design<T>) {
-        let (t1, t2) = self.theta(d);
-        if t1.iter().chain(t2.iter()).any(|v| !v.is_finite()) {
-            return;
-        }
-        self.rows.relinearize(&t1, &t2, d.units.om_ref);
-        self.lin.move_to(t1, t2);
-        self.rls1.set_estimate([T::ZERO; 8]);
-        self.rls2.set_estimate([T::ZERO; 6]);
-        self.lin.relins = self.lin.relins.saturating_add(1);
     }
 
     /// After a covariance reset the converged trace of the old regime means nothing:

@@ -225,18 +225,10 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate.
+    /// a moderate estimate, spread over four ticks (`relin.rs`).
     #[inline(always)]
     fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
-        let relin_every = d.fit.relin_every;
-        if relin_every > 0
-            && updated
-            && k >= self.lin.last_relin + relin_every
-            && self.deviation_moderate()
-        {
-            self.relinearize(d);
-            self.lin.last_relin = k;
-        }
+        self.relin_tick(d, k, updated);
     }
 
     /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp

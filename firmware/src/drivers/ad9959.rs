@@ -319,20 +319,36 @@ impl AmplitudeWord {
     }
 
     /// From the pump voltage scale `s = (V/V0)²`: `ASF = round(1023·√s)`, `s` clamped to
-    /// `[0, 1]` (NaN gives 0). Computed with an integer square root, so it is exact and
-    /// needs no `std`.
+    /// `[0, 1]` (NaN gives 0). Computed in integers (the `f32`'s mantissa and exponent,
+    /// then an integer square root), so it is exact, needs no `std` and no soft-float
+    /// `f64` on the tick path (the same words as the former `f64` form; test
+    /// `from_scale_in_integers_equals_the_f64_form`).
     pub fn from_scale(s: f32) -> Self {
         let s = if s > 1.0 {
             1.0
         } else if s > 0.0 {
-            f64::from(s)
+            s
         } else {
-            0.0 // also NaN
+            return Self(0); // also NaN
         };
-        let v = f64::from(ASF_MAX) * f64::from(ASF_MAX) * s;
+        // s = mant · 2^(exp − 150) (normal) or frac · 2^−149 (subnormal), exactly
+        let bits = s.to_bits();
+        let exp = (bits >> 23) & 0xFF;
+        let frac = u64::from(bits & 0x7F_FFFF);
+        let (mant, shift) = if exp == 0 {
+            (frac, 149)
+        } else {
+            (frac | 0x80_0000, 150u32.saturating_sub(exp))
+        };
+        // floor(4v), v = 1023²·s: 4·1023²·mant < 2^46 (never saturates), shift ≥ 23
+        // (s ≤ 1)
+        const FOUR_ASF_MAX_SQ: u64 = 4 * (ASF_MAX as u64) * (ASF_MAX as u64);
+        let four_v = FOUR_ASF_MAX_SQ
+            .saturating_mul(mant)
+            .checked_shr(shift)
+            .unwrap_or(0);
         // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)).
-        let n = ((4.0 * v) as u64).isqrt();
-        let asf = n.saturating_add(1) / 2;
+        let asf = four_v.isqrt().saturating_add(1) / 2;
         Self(u16::try_from(asf).map_or(ASF_MAX, |a| a.min(ASF_MAX)))
     }
 
@@ -554,6 +570,57 @@ impl<SPI: SpiDevice> Ad9959<SPI> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The former `f64` form of `from_scale` (the reference).
+    fn from_scale_f64(s: f32) -> AmplitudeWord {
+        let s = if s > 1.0 {
+            1.0
+        } else if s > 0.0 {
+            f64::from(s)
+        } else {
+            0.0
+        };
+        let v = f64::from(ASF_MAX) * f64::from(ASF_MAX) * s;
+        let n = ((4.0 * v) as u64).isqrt();
+        let asf = n.saturating_add(1) / 2;
+        AmplitudeWord(u16::try_from(asf).map_or(ASF_MAX, |a| a.min(ASF_MAX)))
+    }
+
+    #[test]
+    fn from_scale_in_integers_equals_the_f64_form() {
+        let specials = [
+            0.0f32,
+            -0.0,
+            -1.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MIN_POSITIVE,
+            1e-45,
+            1.0,
+            1.000_000_1,
+            0.999_999_94,
+            0.81,
+            2.0,
+        ];
+        // every word's boundary (1023·√s = n + ½) and its f32 neighbours
+        let edges = (0..1023u32).flat_map(|n| {
+            let b = ((f64::from(n) + 0.5) / 1023.0).powi(2) as f32;
+            [
+                b,
+                f32::from_bits(b.to_bits() + 1),
+                f32::from_bits(b.to_bits() - 1),
+            ]
+        });
+        // and a sweep over (0, 1.2]
+        let sweep = (1..=120_000).map(|i| i as f32 * 1e-5);
+        let mut n = 0;
+        for s in specials.into_iter().chain(edges).chain(sweep) {
+            assert_eq!(AmplitudeWord::from_scale(s), from_scale_f64(s), "s = {s:e}");
+            n += 1;
+        }
+        assert_eq!(n, 13 + 3 * 1023 + 120_000);
+    }
 
     #[test]
     fn rounding_and_clock_validation() {
