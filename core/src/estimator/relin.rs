@@ -10,7 +10,7 @@
 //! | k     | trigger (same test as before), capture x₁, x₂; θ̂1 = θ1n + sc1·x₁  |
 //! | k + 1 | θ̂2 = θ2n + sc2·x₂ (the captured x₂)                              |
 //! | k + 2 | the row constants of the new point ([`NominalConsts::new`])       |
-//! | k + 3 | swap: the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured    |
+//! | k + 3 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
 //!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
@@ -81,6 +81,9 @@ impl<T: Real> State<T> {
                 p.t24 = T::from_f64(p.t2[3]);
                 p.phase = 3;
             }
+            // the swap waits for an updated tick: a flagged (held) sample must leave θ̂
+            // exactly as it was, and the swap moves it by rounding
+            _ if !updated => {}
             _ => {
                 // by reference (the pending part is not copied on this tick)
                 let State {
@@ -140,6 +143,10 @@ mod tests {
         assert_eq!(s.lin.pending.phase, 3);
         assert_eq!(s.lin.relins, 0);
         let (b1, b2) = s.theta(d);
+        // a held (not updated) tick leaves the swap pending and θ̂ bit for bit
+        s.relin_tick(d, k + 3, false);
+        assert_eq!((s.lin.pending.phase, s.lin.relins), (3, 0));
+        assert_eq!(s.theta(d), (b1, b2));
         s.relin_tick(d, k + 3, true);
         assert_eq!((s.lin.pending.phase, s.lin.relins), (0, 1));
         let (a1, a2) = s.theta(d);
