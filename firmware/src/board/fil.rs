@@ -18,6 +18,7 @@
 //! [`App`]: paragyro_firmware::app::App
 //! [`App::tick`]: paragyro_firmware::app::App::tick
 
+use super::stack::{paint_stack, stack_high_water};
 use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, syscall};
@@ -94,44 +95,6 @@ fn range_of(bits: u32) -> Option<Range> {
 /// Stack painting (as the qemu board): the free RAM between the statics and the stack
 /// pointer is filled with this word at boot; the lowest word that no longer holds it gives
 /// the stack's high-water mark, reported in the end answer.
-const PAINT: u32 = 0x5A5A_A5A5;
-
-unsafe extern "C" {
-    static _stack_end: u32;
-    static _stack_start: u32;
-}
-
-fn stack_bounds() -> (usize, usize) {
-    // only the addresses of the linker symbols are taken
-    (
-        core::ptr::addr_of!(_stack_end) as usize,
-        core::ptr::addr_of!(_stack_start) as usize,
-    )
-}
-
-#[inline(never)]
-fn paint_stack() {
-    let (lo, _) = stack_bounds();
-    // leave 256 bytes below the current frame alone
-    let hi = cortex_m::register::msp::read() as usize - 256;
-    let mut a = (lo + 3) & !3;
-    while a < hi {
-        // SAFETY: RAM between the statics and the live stack is unused at this point.
-        unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
-        a += 4;
-    }
-}
-
-fn stack_high_water() -> u32 {
-    let (lo, top) = stack_bounds();
-    let mut a = (lo + 3) & !3;
-    // SAFETY: reading RAM inside the stack region.
-    while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
-        a += 4;
-    }
-    (top - a) as u32
-}
-
 #[entry]
 fn main() -> ! {
     paint_stack();
@@ -285,7 +248,7 @@ fn session(syst: &mut SYST) -> bool {
         if m.flags & flag::END != 0 {
             out.tick = TICK_END;
             report(&app, drdy_missing, &mut out);
-            out.stack_peak = stack_high_water();
+            out.stack_peak = stack_high_water() as u32;
             let ok = write_all(&fout, &out.encode());
             defmt::info!("fil: firmware counters {}", app.counters());
             defmt::info!("fil: core counters {}", app.estimator().counters());

@@ -4,6 +4,8 @@
 pub mod fil;
 #[cfg(feature = "qemu")]
 pub mod qemu;
+#[cfg(any(feature = "qemu", feature = "fil"))]
+mod stack;
 #[cfg(feature = "stm32f405")]
 pub mod stm32f405;
 

@@ -33,6 +33,7 @@
 //! [`App`]: paragyro_firmware::app::App
 //! [`App::tick_with_pump`]: paragyro_firmware::app::App::tick_with_pump
 
+use super::stack::{paint_stack, stack_bounds, stack_high_water};
 use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::debug;
@@ -63,44 +64,6 @@ impl DelayNs for NoWait {
 /// Stack painting: the free RAM between the end of the statics (`_stack_end`) and the
 /// current stack pointer is filled with this word at boot; the lowest word that no longer
 /// holds it after the run gives the stack's high-water mark.
-const PAINT: u32 = 0x5A5A_A5A5;
-
-unsafe extern "C" {
-    static _stack_end: u32;
-    static _stack_start: u32;
-}
-
-fn stack_bounds() -> (usize, usize) {
-    // only the addresses of the linker symbols are taken
-    (
-        core::ptr::addr_of!(_stack_end) as usize,
-        core::ptr::addr_of!(_stack_start) as usize,
-    )
-}
-
-#[inline(never)]
-fn paint_stack() {
-    let (lo, _) = stack_bounds();
-    // leave 256 bytes below the current frame alone
-    let hi = cortex_m::register::msp::read() as usize - 256;
-    let mut a = (lo + 3) & !3;
-    while a < hi {
-        // SAFETY: RAM between the statics and the live stack is unused at this point.
-        unsafe { core::ptr::write_volatile(a as *mut u32, PAINT) };
-        a += 4;
-    }
-}
-
-fn stack_high_water() -> usize {
-    let (lo, top) = stack_bounds();
-    let mut a = (lo + 3) & !3;
-    // SAFETY: reading RAM inside the stack region.
-    while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == PAINT {
-        a += 4;
-    }
-    top - a
-}
-
 #[entry]
 fn main() -> ! {
     paint_stack();
