@@ -5,9 +5,7 @@
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use anyhow::Context;
-
-use super::{Ctx, EXIT_LOAD, EXIT_RUN, Failure, fail, note};
+use super::{Ctx, EXIT_LOAD, EXIT_RUN, Failure, fail, note, write_report};
 use paragyro_simulator::faults::{CampaignOptions, FaultClass, run_campaign};
 
 /// Run the fault campaign; write faults.json and faults.md.
@@ -71,26 +69,8 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         }
     };
     let rep = run_campaign(&opts, &progress).map_err(fail(EXIT_RUN))?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))
-        .map_err(fail(EXIT_RUN))?;
-    let json = a.out.join("faults.json");
-    let md = a.out.join("faults.md");
-    let text = serde_json::to_string_pretty(&rep)
-        .context("cannot serialise the report")
-        .map_err(fail(EXIT_RUN))?;
-    std::fs::write(&json, text + "\n")
-        .with_context(|| format!("cannot write {}", json.display()))
-        .map_err(fail(EXIT_RUN))?;
     let table = rep.table_md();
-    std::fs::write(&md, &table)
-        .with_context(|| format!("cannot write {}", md.display()))
-        .map_err(fail(EXIT_RUN))?;
-    ctx.say(&format!(
-        "Wrote {} and {}\n{table}",
-        json.display(),
-        md.display()
-    ))
+    write_report(ctx, &a.out, "faults", &rep, &table)
 }
 
 #[cfg(test)]

@@ -132,6 +132,36 @@ pub fn write_run(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>, Failure
         .map_err(fail(EXIT_RUN))
 }
 
+/// Writes a report as `DIR/STEM.json` (pretty, serde) and its Markdown table as
+/// `DIR/STEM.md`, creating `dir`; says where, with the table (`faults`, `soak`).
+pub fn write_report<T: serde::Serialize>(
+    ctx: &mut Ctx,
+    dir: &Path,
+    stem: &str,
+    rep: &T,
+    table: &str,
+) -> Result<(), Failure> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create {}", dir.display()))
+        .map_err(fail(EXIT_RUN))?;
+    let json = dir.join(format!("{stem}.json"));
+    let md = dir.join(format!("{stem}.md"));
+    let text = serde_json::to_string_pretty(rep)
+        .context("cannot serialise the report")
+        .map_err(fail(EXIT_RUN))?;
+    std::fs::write(&json, text + "\n")
+        .with_context(|| format!("cannot write {}", json.display()))
+        .map_err(fail(EXIT_RUN))?;
+    std::fs::write(&md, table)
+        .with_context(|| format!("cannot write {}", md.display()))
+        .map_err(fail(EXIT_RUN))?;
+    ctx.say(&format!(
+        "Wrote {} and {}\n{table}",
+        json.display(),
+        md.display()
+    ))
+}
+
 /// "  path\n" per file.
 pub fn file_list(files: &[PathBuf]) -> String {
     files

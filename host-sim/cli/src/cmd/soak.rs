@@ -4,9 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-
-use super::{Ctx, EXIT_RUN, Failure, fail, note};
+use super::{Ctx, EXIT_RUN, Failure, fail, note, write_report};
 use paragyro_simulator::faults::soak::{soak_both, table_md};
 
 /// Soak benchmark: hours of the f32 core, dither off and on; soak.json, soak.md.
@@ -45,24 +43,6 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         soak_s, a.converge_s
     ));
     let reps = soak_both(a.converge_s, soak_s, a.window_s, a.seed).map_err(fail(EXIT_RUN))?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))
-        .map_err(fail(EXIT_RUN))?;
-    let json = a.out.join("soak.json");
-    let md = a.out.join("soak.md");
-    let text = serde_json::to_string_pretty(&reps)
-        .context("cannot serialise the report")
-        .map_err(fail(EXIT_RUN))?;
-    std::fs::write(&json, text + "\n")
-        .with_context(|| format!("cannot write {}", json.display()))
-        .map_err(fail(EXIT_RUN))?;
     let table = table_md(&reps);
-    std::fs::write(&md, &table)
-        .with_context(|| format!("cannot write {}", md.display()))
-        .map_err(fail(EXIT_RUN))?;
-    ctx.say(&format!(
-        "Wrote {} and {}\n{table}",
-        json.display(),
-        md.display()
-    ))
+    write_report(ctx, &a.out, "soak", &reps, &table)
 }
