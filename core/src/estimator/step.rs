@@ -176,6 +176,8 @@ impl<T: Real> State<T> {
         let dev14 = d.fit.sc1[3] * x1[3];
         let dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
         let th = self.rate.slow_theta(dev14, &dev2);
+        // a gate is renewed while it lasts (the gate itself clears `settled`)
+        let slow_ok = self.was_settled || self.rate.gates(self.k);
         self.rate.track(
             &d.rate,
             env,
@@ -183,7 +185,7 @@ impl<T: Real> State<T> {
             p.y.cube.h1,
             &th,
             self.k,
-            self.was_settled,
+            slow_ok,
         );
         if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
             self.hand_over_rate(d, delta.to_f64());
