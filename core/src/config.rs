@@ -140,6 +140,9 @@ pub struct RateConfig {
     pub gate_accel_dps2: f64,
     /// See `gate_accel_dps2`, s.
     pub gate_s: f64,
+    /// … and while the narrow channel's rate differs from the slow RLS's by more than
+    /// this, °/s (a slow move of the rate the slow RLS would otherwise chase).
+    pub gate_dev_dps: f64,
 }
 
 /// The whole configuration.
@@ -253,6 +256,7 @@ impl Config {
                 full_scale_dps: 1000.0,
                 gate_accel_dps2: 2000.0,
                 gate_s: 0.3,
+                gate_dev_dps: 1.0,
             },
         }
     }
@@ -499,7 +503,8 @@ impl RateConfig {
         }
         pos(self.full_scale_dps, "rate.full_scale_dps")?;
         pos(self.gate_accel_dps2, "rate.gate_accel_dps2")?;
-        nonneg(self.gate_s, "rate.gate_s")
+        nonneg(self.gate_s, "rate.gate_s")?;
+        pos(self.gate_dev_dps, "rate.gate_dev_dps")
     }
 }
 

@@ -40,8 +40,9 @@
 //! ramp (issue 10's note). What is here:
 //!
 //! * a second, narrower copy of the row (corner `rate.coupling_hz`, its dither error
-//!   ≈ 0.03 °/s) watches the rate's acceleration; above `rate.gate_accel_dps2` the slow RLS
-//!   is gated (no update, no detector) until the rate has been quiet for `rate.gate_s`;
+//!   ≈ 0.03 °/s) watches the rate: while its acceleration is above `rate.gate_accel_dps2`
+//!   or it differs from the slow RLS's rate by more than `rate.gate_dev_dps`, the slow
+//!   RLS is gated (no update, no detector), and for `rate.gate_s` after;
 //! * at the end of such a transient the slow linearisation point takes the new rate from
 //!   the narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 averaged over the quiet time minus
 //!   the slow θ24), so the slow rows continue consistent instead of seeing a step.
@@ -87,6 +88,8 @@ pub struct RateDesign<T> {
     /// The slow-RLS gate: |γ′| threshold (per τ²) and length (samples).
     gate_accel: T,
     gate_len: u64,
+    /// The slow-RLS gate: |θ24 narrow − θ24 slow| threshold (= 2·rate difference).
+    gate_dev: T,
     /// (lock threshold in L0)²: below it the fast row is not solved.
     min_amp2: T,
     /// 1/(2ω_ref): quadrature coefficient → rate-equivalent γ.
@@ -119,6 +122,7 @@ impl<T: Real> RateDesign<T> {
             full_scale: T::from_f64(cfg.rate.full_scale_dps / to_dps),
             gate_accel: T::from_f64(cfg.rate.gate_accel_dps2 / to_dps / omega0),
             gate_len: libm::round(cfg.rate.gate_s * cfg.fs_hz).max(0.0) as u64,
+            gate_dev: T::from_f64(2.0 * cfg.rate.gate_dev_dps / to_dps),
             min_amp2: T::from_f64(lock * lock),
             inv_2om: T::from_f64(0.5 / om_ref),
             om_ref2: om_ref * om_ref,
@@ -366,7 +370,8 @@ impl<T: Real> RateState<T> {
         self.est.quad = -t23;
         self.est.gamma_slow += d.alpha_slow * (gamma - self.est.gamma_slow);
         let gp = (gamma_c - prev) * d.inv_ts;
-        if slow_settled && gp.abs() > d.gate_accel {
+        let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
+        if slow_settled && moved {
             self.gate_until = k + d.gate_len;
             self.handover_due = true;
         }
