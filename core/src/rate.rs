@@ -42,7 +42,9 @@
 //! * a second, narrower copy of the row (corner `rate.coupling_hz`, its dither error
 //!   ≈ 0.03 °/s) watches the rate: while its acceleration is above `rate.gate_accel_dps2`
 //!   or it differs from the slow RLS's rate by more than `rate.gate_dev_dps`, the slow
-//!   RLS is gated (no update, no detector), and for `rate.gate_s` after;
+//!   RLS is gated (no update, no detector), and for `rate.gate_s` after — provided its
+//!   quadrature agrees with the slow θ23 to the same tolerance: a drift of the device
+//!   (ωy², damping) moves both directions of the row and is left to the slow RLS;
 //! * at the end of such a transient the slow linearisation point takes the new rate from
 //!   the narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 averaged over the quiet time minus
 //!   the slow θ24), so the slow rows continue consistent instead of seeing a step.
@@ -53,8 +55,9 @@
 //! # Validity
 //!
 //! The rate is valid when this sample's inputs are valid, the drive is locked, the slow
-//! identification has settled at least once since start-up, the fast row is solvable
-//! (|A1| above the lock threshold) and |rate| ≤ `rate.full_scale_dps`.
+//! identification has settled at least once since start-up and no change of the device
+//! is pending (the slow θ the row relies on are being re-identified), the fast row is
+//! solvable (|A1| above the lock threshold) and |rate| ≤ `rate.full_scale_dps`.
 //!
 //! Never panics, never allocates; a non-finite solution is skipped and the last value
 //! held.
@@ -348,7 +351,7 @@ impl<T: Real> RateState<T> {
             self.started = true;
         }
         let (t24, t23, n23) = self.f.solve(&d.svf, &sig, th);
-        let (t24c, _, _) = self.fc.solve(&d.svf_cpl, &sig, th);
+        let (t24c, t23c, _) = self.fc.solve(&d.svf_cpl, &sig, th);
         let gamma = -(t24 + th.mu_xy) * T::from_f64(0.5);
         let gamma_c = -(t24c + th.mu_xy) * T::from_f64(0.5);
         let big = d.full_scale + d.full_scale;
@@ -370,8 +373,12 @@ impl<T: Real> RateState<T> {
         self.est.quad = -t23;
         self.est.gamma_slow += d.alpha_slow * (gamma - self.est.gamma_slow);
         let gp = (gamma_c - prev) * d.inv_ts;
+        // the rate moved (fast, or away from the slow RLS's) while the quadrature agrees
+        // with the slow θ23: a drift of the device (ωy², damping) shows in both
+        // directions of the row and is left to the slow RLS
         let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
-        if slow_settled && moved {
+        let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
+        if slow_settled && moved && quad_ok {
             self.gate_until = k + d.gate_len;
             self.handover_due = true;
         }
@@ -417,6 +424,7 @@ impl<T: Real> RateState<T> {
         inputs_valid: bool,
         drive_locked: bool,
         settled: bool,
+        change_pending: bool,
     ) -> bool {
         if settled && !self.settled_once {
             self.est.gamma_slow = self.est.gamma;
@@ -425,6 +433,7 @@ impl<T: Real> RateState<T> {
         self.valid = inputs_valid
             && drive_locked
             && self.settled_once
+            && !change_pending
             && self.est.solved
             && self.est.gamma.abs() <= d.full_scale;
         self.valid
@@ -463,7 +472,7 @@ pub struct RateOutput {
     /// term a real gyro fights; it is in phase with the drive displacement, the rate
     /// with its velocity.
     pub quadrature_dps: f64,
-    /// Valid: inputs valid, drive locked, slow estimate settled once, row solvable, within
-    /// full scale.
+    /// Valid: inputs valid, drive locked, slow estimate settled once and no change
+    /// pending, row solvable, within full scale.
     pub valid: bool,
 }

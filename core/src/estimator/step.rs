@@ -67,6 +67,7 @@ impl<T: Real> State<T> {
             health.inputs_valid,
             health.drive_locked,
             health.settled,
+            health.change_detected,
         );
         self.command(d, health, events, updated)
     }
