@@ -77,7 +77,7 @@ mod tests;
 mod validate;
 
 pub use error::{ScenarioError, ScenarioErrorKind};
-pub use events::{EventKind, EventSpec};
+pub use events::{EventKind, EventSpec, chirp_phase};
 use locate::describe;
 pub use spec::{
     EstimatorSpec, MeasureRun, MeasureSpec, NominalSpec, PlantAt, PlantOverrides, PlantParam,
