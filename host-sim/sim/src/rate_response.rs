@@ -334,10 +334,15 @@ pub fn chirp(o: &Options, f0: f64, f1: f64, amp: f64, dur: f64) -> Result<FreqRe
             continue;
         }
         let (g, ph) = ratio(&rows, BASE_DPS, |t| phase(t).0);
+        // unwrapped against the previous point (the lag grows with frequency)
+        let mut deg = ph.to_degrees();
+        if let Some(prev) = points.last().map(|p: &FreqPoint| p.phase_deg) {
+            deg -= 360.0 * ((deg - prev) / 360.0).round();
+        }
         points.push(FreqPoint {
             f_hz: (fa * fb).sqrt(),
             mag_db: 20.0 * g.log10(),
-            phase_deg: ph.to_degrees(),
+            phase_deg: deg,
         });
     }
     let bw = points.windows(2).find_map(|w| {

@@ -190,7 +190,7 @@ pub fn write_plots(
             m.marked_x.push((bw.log10(), format!("{bw:.0} Hz")));
         }
         draw_panel(&areas[0], &m)?;
-        let mut ph = Panel::new("phase".into(), x, (-180.0, 20.0));
+        let mut ph = Panel::new("phase".into(), x, (-360.0, 20.0));
         ph.y_desc = "deg".into();
         ph.x_desc = Some("log10 f, Hz".into());
         ph.lines.push(Line::new(
