@@ -317,9 +317,9 @@ impl<T: Real> RateState<T> {
     }
 
     /// One sample: filters the row in both channels and solves it (when the drive is
-    /// large enough); while the slow estimate is settled (`slow_settled`), a fast
-    /// acceleration of the rate (the narrow channel's) gates the slow RLS from sample `k`
-    /// on ([`RateState::gates`]). `y3` is the sense cube's fundamental `[Y³]₁` (the rows'
+    /// large enough); at sample `k`, while the slow estimate is settled (`slow_settled`),
+    /// a move of the rate (the narrow channel's) gates the slow RLS
+    /// ([`RateState::gates`]). `y3` is the sense cube's fundamental `[Y³]₁` (the rows'
     /// projection).
     #[inline(always)]
     pub fn track(
@@ -329,8 +329,7 @@ impl<T: Real> RateState<T> {
         kn: &Known<T>,
         y3: Cplx<T>,
         th: &SlowTheta<T>,
-        k: u64,
-        slow_settled: bool,
+        (k, slow_settled): (u64, bool),
     ) {
         let (a, b) = (e.a[0], e.b[0]);
         let om = kn.om;

@@ -185,8 +185,7 @@ impl<T: Real> State<T> {
             &self.last_known,
             p.y.cube.h1,
             &th,
-            self.k,
-            slow_ok,
+            (self.k, slow_ok),
         );
         if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
             self.hand_over_rate(d, delta.to_f64());

@@ -234,7 +234,7 @@ pub fn step(o: &Options) -> Result<(StepResult, Vec<TraceRow>)> {
         if r.t_s >= T0_S + 0.025 - 1e-9 {
             max_err = max_err.max(e);
         }
-        if !(e <= 1.0) {
+        if e.is_nan() || e > 1.0 {
             last_bad = Some(r.t_s);
         }
     }

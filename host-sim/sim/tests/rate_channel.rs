@@ -41,7 +41,7 @@ fn step_response() {
 fn sine_10hz() {
     let (r, _) = rate_response::sine(&opts(2), 10.0, 50.0, 1.5).unwrap();
     assert!((r.gain - 1.0).abs() < 0.03, "{r:?}");
-    assert!(r.phase_deg < -10.0 && r.phase_deg > -25.0, "{r:?}");
+    assert!((-25.0..-10.0).contains(&r.phase_deg), "{r:?}");
     assert_eq!(r.resets, 0, "{r:?}");
     assert!(r.slow_theta_max_dev_sigma < 5.0, "{r:?}");
 }
@@ -51,7 +51,7 @@ fn sine_10hz() {
 fn chirp_bandwidth() {
     let r = rate_response::chirp(&opts(3), 2.0, 200.0, 20.0, 6.0).unwrap();
     let bw = r.bandwidth_3db_hz.expect("a -3 dB crossing");
-    assert!(bw >= 70.0 && bw < 150.0, "{bw}");
+    assert!((70.0..150.0).contains(&bw), "{bw}");
     for p in r.points.iter().filter(|p| p.f_hz < 20.0) {
         assert!(p.mag_db.abs() < 1.0, "{p:?}");
     }
@@ -78,9 +78,9 @@ fn noise_against_crlb_monte_carlo() {
     let mut ratios = Vec::new();
     for seed in [11, 12, 13] {
         let n = rate_response::noise(&opts(seed), Some(78.0)).unwrap();
-        assert!(n.ratio_same_g > 0.7 && n.ratio_same_g < 2.0, "{n:?}");
+        assert!((0.7..2.0).contains(&n.ratio_same_g), "{n:?}");
         ratios.push(n.ratio_same_g);
     }
     let m = ratios.iter().sum::<f64>() / ratios.len() as f64;
-    assert!(m > 0.8 && m < 1.5, "{ratios:?}");
+    assert!((0.8..1.5).contains(&m), "{ratios:?}");
 }
