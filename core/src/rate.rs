@@ -203,7 +203,7 @@ impl<T: Real> FastFilters<T> {
     /// Filters one sample and solves the row: (θ24, θ23, |c23|²). θ24 is the weighted
     /// least squares along the Coriolis column given θ23 = the slow prior; θ23 is then
     /// what is left along the quadrature column.
-    #[inline(always)]
+    #[inline(never)] // twice per tick (wide and narrow): one copy of the code (flash)
     fn solve(&mut self, c: &SvfCoeffs<T>, s: &RowSignals<T>, th: &SlowTheta<T>) -> (T, T, T) {
         let fb = self.b.update(c, s.b);
         let fomb = self.omb.update(c, s.omb);
