@@ -21,6 +21,7 @@
 //! | [`rls`] | Bierman-UD recursive least squares |
 //! | [`monitor`] | input checks, change detector, excitation, settle test |
 //! | [`excitation`], [`retune`] | pump scheduler (dither, ramps), retune supervisor |
+//! | [`rate`] | the fast rate channel (every sample, given the slow parameters), quadrature |
 //! | [`health`], [`output`] | [`Health`], [`Counters`], [`StepOutput`] and its events |
 //! | [`estimator`] | the design, the state and the one `step()` that ties the stages |
 #![no_std]
@@ -39,6 +40,7 @@ pub mod lpf;
 pub mod monitor;
 pub mod output;
 pub mod physics;
+pub mod rate;
 pub mod real;
 pub mod retune;
 pub mod rls;

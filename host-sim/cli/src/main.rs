@@ -79,6 +79,8 @@ enum Command {
     Replay(cmd::replay::Args),
     /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
     Demo(cmd::demo::Args),
+    /// The rate channel's datasheet: step, chirp (bandwidth), sines, ±300 °/s ramp, g-sensitivity, noise vs CRLB.
+    RateResponse(cmd::rate_response::Args),
 }
 
 fn main() -> ExitCode {
@@ -124,6 +126,7 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Diagnose(a) => diagnose::exec(a, ctx),
         Command::Replay(a) => replay::exec(a, ctx),
         Command::Demo(a) => demo::exec(a, ctx),
+        Command::RateResponse(a) => rate_response::exec(a, ctx),
     }
 }
 
