@@ -122,6 +122,29 @@ pub struct RetuneConfig {
     pub min_interval_s: f64,
 }
 
+/// The fast rate channel (`crate::rate`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateConfig {
+    /// Corner of its wide-band state-variable filter (double real pole), Hz: the rate's
+    /// −3 dB bandwidth is ≈ 0.64× this (times the lock-in low-pass). Below fs_hz (the
+    /// FOH-exact filter is defined for any corner; above ≈ fs/3 it only adds noise).
+    pub svf_hz: f64,
+    /// Corner of the narrow channel's filter, Hz: the same row, narrower, whose rate
+    /// acceleration gates the slow RLS and whose rate the slow RLS takes at the end of a
+    /// transient (`rate`). At most `svf_hz`.
+    pub coupling_hz: f64,
+    /// Full scale: the rate is flagged invalid beyond it, °/s.
+    pub full_scale_dps: f64,
+    /// The slow RLS is gated while the rate accelerates faster than this (a step, a
+    /// fast sine or chirp), °/s², and for `gate_s` after.
+    pub gate_accel_dps2: f64,
+    /// See `gate_accel_dps2`, s.
+    pub gate_s: f64,
+    /// … and while the narrow channel's rate differs from the slow RLS's by more than
+    /// this, °/s (a slow move of the rate the slow RLS would otherwise chase).
+    pub gate_dev_dps: f64,
+}
+
 /// The whole configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
@@ -162,6 +185,8 @@ pub struct Config {
     pub monitor: MonitorConfig,
     /// Retune supervisor.
     pub retune: RetuneConfig,
+    /// The fast rate channel.
+    pub rate: RateConfig,
 }
 
 impl Config {
@@ -225,6 +250,14 @@ impl Config {
                 lock_lost_s: 0.05,
                 min_interval_s: 1.0,
             },
+            rate: RateConfig {
+                svf_hz: 150.0,
+                coupling_hz: 40.0,
+                full_scale_dps: 1000.0,
+                gate_accel_dps2: 2000.0,
+                gate_s: 0.3,
+                gate_dev_dps: 1.0,
+            },
         }
     }
 
@@ -244,7 +277,8 @@ impl Config {
         self.validate_rows()?;
         self.rls.validate()?;
         self.monitor.validate()?;
-        self.retune.validate()
+        self.retune.validate()?;
+        self.rate.validate(self.fs_hz)
     }
 
     /// f0, the sample rate, L0, the lock-in low-pass and the pump reference.
@@ -453,6 +487,24 @@ impl RetuneConfig {
         nonneg(t.lock_min_um, "retune.lock_min_um")?;
         nonneg(t.lock_lost_s, "retune.lock_lost_s")?;
         nonneg(t.min_interval_s, "retune.min_interval_s")
+    }
+}
+
+impl RateConfig {
+    #[inline]
+    fn validate(&self, fs_hz: f64) -> Result<(), ConfigError> {
+        pos(self.svf_hz, "rate.svf_hz")?;
+        if self.svf_hz >= fs_hz {
+            return Err(E::new("rate.svf_hz", "must be below fs_hz"));
+        }
+        pos(self.coupling_hz, "rate.coupling_hz")?;
+        if self.coupling_hz > self.svf_hz {
+            return Err(E::new("rate.coupling_hz", "must be at most rate.svf_hz"));
+        }
+        pos(self.full_scale_dps, "rate.full_scale_dps")?;
+        pos(self.gate_accel_dps2, "rate.gate_accel_dps2")?;
+        nonneg(self.gate_s, "rate.gate_s")?;
+        pos(self.gate_dev_dps, "rate.gate_dev_dps")
     }
 }
 

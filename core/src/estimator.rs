@@ -172,6 +172,17 @@ impl<T: Real> Estimator<T> {
         self.state.theta(&self.design)
     }
 
+    /// The fast rate channel's output after the last step (rate, slow rate, quadrature,
+    /// validity).
+    pub fn rate_output(&self) -> crate::rate::RateOutput {
+        self.state.rate.output(&self.design.rate)
+    }
+
+    /// The fast rate channel's last estimate (non-dimensional γ, quadrature).
+    pub fn rate_estimate(&self) -> crate::rate::RateEstimate<T> {
+        *self.state.rate.estimate()
+    }
+
     /// 1-σ uncertainty of θ̂ relative to |θ_design| (the square roots of the diagonal of
     /// the column-scaled covariance; rows are weighted to unit noise, so P is the
     /// estimate's covariance when the configured row noise is right).
@@ -195,7 +206,8 @@ impl<T: Real> Estimator<T> {
         physical_from_theta(&t1, &t2)
     }
 
-    /// Estimated angular rate, °/s.
+    /// Estimated angular rate, °/s: the slow one (γ of [`Estimator::theta`]); the fast
+    /// rate channel's is [`Estimator::rate_output`].
     pub fn rate_dps(&self) -> f64 {
         rate_dps_from_gamma(self.physical().gamma, self.design.cfg.omega0_rad_s())
     }

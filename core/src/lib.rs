@@ -21,6 +21,7 @@
 //! | [`rls`] | Bierman-UD recursive least squares |
 //! | [`monitor`] | input checks, change detector, excitation, settle test |
 //! | [`excitation`], [`retune`] | pump scheduler (dither, ramps), retune supervisor |
+//! | [`rate`] | the fast rate channel (every sample, given the slow parameters), quadrature |
 //! | [`health`], [`output`] | [`Health`], [`Counters`], [`StepOutput`] and its events |
 //! | [`persist`] | warm start: the converged estimate as a versioned, CRC-checked snapshot |
 //! | [`estimator`] | the design, the state and the one `step()` that ties the stages |
@@ -41,6 +42,7 @@ pub mod monitor;
 pub mod output;
 pub mod persist;
 pub mod physics;
+pub mod rate;
 pub mod real;
 pub mod retune;
 pub mod rls;

@@ -2,6 +2,7 @@
 //! the events of the step.
 
 use crate::health::Health;
+pub use crate::rate::RateOutput;
 
 /// Event bits of one step ([`StepOutput::events`]).
 pub mod event {
@@ -36,4 +37,6 @@ pub struct StepOutput {
     pub events: u8,
     /// The RLS was updated with this sample.
     pub updated: bool,
+    /// The fast rate channel: rate, slow rate, quadrature and the rate's validity.
+    pub rate: RateOutput,
 }

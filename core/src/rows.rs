@@ -172,6 +172,27 @@ struct DcInputs<T> {
     vy: T,
 }
 
+/// The harmonic projections of one sample (both axes), shared by the rows and the fast
+/// rate channel (which needs the sense cube's fundamental `[Y³]₁`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Projections<T> {
+    /// Drive axis.
+    pub x: AxisProj<T>,
+    /// Sense axis.
+    pub y: AxisProj<T>,
+}
+
+impl<T: Real> Projections<T> {
+    /// The projections of the envelopes `e`.
+    #[inline(always)]
+    pub fn of(design: &RowDesign<T>, e: &Envelopes<T>) -> Self {
+        Projections {
+            x: project(&design.tables, e.x0, &e.a, true),
+            y: project(&design.tables, e.y0, &e.b, false),
+        }
+    }
+}
+
 /// The design of the row builder: the slow state-variable filter's coefficients and the
 /// synthesis tables of the harmonic projections (built once; `Default` is the all-zero
 /// placeholder of an estimator that is not designed yet).
@@ -383,8 +404,22 @@ impl<T: Real> RowBuilder<T> {
         kn: &Known<T>,
         rows: &mut RowSet<T>,
     ) {
-        let px = project(&design.tables, e.x0, &e.a, true);
-        let py = project(&design.tables, e.y0, &e.b, false);
+        let p = Projections::of(design, e);
+        self.push_projected(design, e, kn, &p, rows);
+    }
+
+    /// [`RowBuilder::push`] with the projections already made (the estimator's tick:
+    /// the fast rate channel needs the sense cube's fundamental too).
+    #[inline(always)]
+    pub fn push_projected(
+        &mut self,
+        design: &RowDesign<T>,
+        e: &Envelopes<T>,
+        kn: &Known<T>,
+        p: &Projections<T>,
+        rows: &mut RowSet<T>,
+    ) {
+        let (px, py) = (p.x, p.y);
         let hin = [
             self.harm_inputs(1, e, kn, &px, &py),
             self.harm_inputs(3, e, kn, &px, &py),

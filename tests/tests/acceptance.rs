@@ -26,11 +26,11 @@ fn identify_full_length_f32_and_f64() {
                 theta_name(j)
             );
         }
-        let re = rel(last.rate_dps_est, 150.0);
+        let re = rel(last.rate_dps_slow, 150.0);
         assert!(
             re <= 3e-3,
             "{precision:?}: rate {} °/s ({re:.2e})",
-            last.rate_dps_est
+            last.rate_dps_slow
         );
         // all θ within 10 % by 0.2 s after the dither starts (t = 1 s), and stay there
         let t = all_within_from(&r.trace, 0.10, 1.0, 10.0).expect("never all within 10 %");

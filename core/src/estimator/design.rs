@@ -11,6 +11,7 @@ use crate::config::{Config, PumpProfile};
 use crate::lpf::ReplicaCoeffs;
 use crate::monitor::{ChangeDesign, InputLimits, SettleDesign};
 use crate::physics::theta_from_physical;
+use crate::rate::RateDesign;
 use crate::real::Real;
 use crate::rows::{NROWS, RowDesign};
 
@@ -181,6 +182,8 @@ pub(crate) struct Design<T: Real> {
     pub replica: ReplicaCoeffs<T>,
     /// The slow state-variable filter and the synthesis tables (`rows`).
     pub rows: RowDesign<T>,
+    /// The fast rate channel (`rate`).
+    pub rate: RateDesign<T>,
     /// Scales, weights, RLS limits, change detector.
     pub fit: Fit<T>,
 }
@@ -197,6 +200,7 @@ impl<T: Real> Design<T> {
             watch: Watch::default(),
             replica: ReplicaCoeffs::default(),
             rows: RowDesign::default(),
+            rate: RateDesign::default(),
             fit: Fit::default(),
         }
     }
@@ -216,6 +220,7 @@ impl<T: Real> Design<T> {
             watch,
             replica,
             rows,
+            rate,
             fit,
         } = self;
         *f_cfg = *cfg;
@@ -223,6 +228,7 @@ impl<T: Real> Design<T> {
         *watch = Watch::of(cfg);
         *replica = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts);
         *rows = RowDesign::new(w_svf, ts);
+        *rate = RateDesign::of(cfg);
         *fit = Fit::of(cfg);
     }
 }

@@ -13,6 +13,7 @@ use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
 use crate::monitor::{ChangeDetector, ExcitationMeter, SettleTest, StuckDetector};
 use crate::physics::theta_from_physical;
+use crate::rate::RateState;
 use crate::real::Real;
 use crate::retune::{Supervisor, SupervisorSettings};
 use crate::rls::{Rls, RlsSettings};
@@ -86,6 +87,8 @@ pub(crate) struct State<T: Real> {
     pub rls1: Rls<T, 8>,
     pub rls2: Rls<T, 6>,
     pub lin: Linearisation<T>,
+    /// The fast rate channel (module `rate`).
+    pub rate: RateState<T>,
     // ---- monitors
     pub stuck: StuckDetector<T>,
     pub det1: ChangeDetector<T>,
@@ -131,6 +134,7 @@ impl<T: Real> State<T> {
             rls1: Rls::blank(),
             rls2: Rls::blank(),
             lin: Linearisation::default(),
+            rate: RateState::default(),
             stuck: StuckDetector::default(),
             det1: ChangeDetector::default(),
             det2: ChangeDetector::default(),
@@ -170,6 +174,7 @@ impl<T: Real> State<T> {
             rls1,
             rls2,
             lin,
+            rate,
             stuck,
             det1,
             det2,
@@ -199,6 +204,7 @@ impl<T: Real> State<T> {
         *rls2 = Rls::new(rls_settings(cfg, 6.0));
         *lin = Linearisation::default();
         lin.move_to(th1n, th2n);
+        *rate = RateState::new(&d.rate);
         *stuck = StuckDetector::default();
         *det1 = ChangeDetector::new(&d.fit.change);
         *det2 = ChangeDetector::new(&d.fit.change);

@@ -18,9 +18,10 @@ use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
 use crate::monitor::InputCheck;
 use crate::output::{StepOutput, event};
+use crate::rate::RateOutput;
 use crate::real::Real;
 use crate::retune::{RetuneAction, RetuneInputs, drive_band};
-use crate::rows::{Envelopes, Known, NROWS};
+use crate::rows::{Envelopes, Known, NROWS, Projections};
 use crate::sample::Sample;
 
 impl<T: Real> State<T> {
@@ -42,9 +43,14 @@ impl<T: Real> State<T> {
             return self.hold_centre(d, events);
         };
         let exc_var = self.known_signals(d, pump_hz, pump_scale, acc);
+        let proj = Projections::of(&d.rows, &env);
+        self.track_rate(d, &env, &proj);
         self.rows
-            .push(&d.rows, &env, &self.last_known, &mut self.last_rows);
-        let gated = k < d.watch.gate_startup || k < self.jump_gate_until || k < self.bad_gate_until;
+            .push_projected(&d.rows, &env, &self.last_known, &proj, &mut self.last_rows);
+        let gated = k < d.watch.gate_startup
+            || k < self.jump_gate_until
+            || k < self.bad_gate_until
+            || self.rate.gates(k);
         let updated = !gated && good;
         if updated {
             self.update(d, k, &mut events);
@@ -56,6 +62,13 @@ impl<T: Real> State<T> {
         let drive_amp = env.a[0].abs();
         let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
         self.health = health;
+        self.rate.assess(
+            &d.rate,
+            health.inputs_valid,
+            health.drive_locked,
+            health.settled,
+            health.change_detected,
+        );
         self.command(d, health, events, updated)
     }
 
@@ -109,6 +122,10 @@ impl<T: Real> State<T> {
             health: self.health,
             events,
             updated: false,
+            rate: RateOutput {
+                valid: false,
+                ..self.rate.output(&d.rate)
+            },
         }
     }
 
@@ -146,6 +163,49 @@ impl<T: Real> State<T> {
         let exc_var = self.exc.push(d.watch.exc_alpha, f_dom);
         self.last_known = known;
         exc_var
+    }
+
+    /// Stage 3a: the fast rate channel on this sample, given the slow θ of the last
+    /// update (module `rate`); at the end of a rate transient the slow linearisation
+    /// point takes the new rate (θ24 + Δ, θ14 − Δ).
+    #[inline(always)]
+    fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>) {
+        self.rate
+            .refresh_nominal(&d.rate, &self.lin.th1n, &self.lin.th2n);
+        let x1 = self.rls1.estimate();
+        let x2 = self.rls2.estimate();
+        let dev14 = d.fit.sc1[3] * x1[3];
+        let dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
+        let th = self.rate.slow_theta(dev14, &dev2);
+        // a gate is renewed while it lasts (the gate itself clears `settled`)
+        let slow_ok = self.was_settled || self.rate.gates(self.k);
+        self.rate.track(
+            &d.rate,
+            env,
+            &self.last_known,
+            p.y.cube.h1,
+            &th,
+            (self.k, slow_ok),
+        );
+        if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
+            self.hand_over_rate(d, delta.to_f64());
+        }
+    }
+
+    /// Moves the linearisation point to the estimate with θ24 + `delta`, θ14 − `delta`
+    /// (a new rate, μxy unchanged); the row filters follow exactly (`rows.relinearize`).
+    #[inline(never)] // rare: its own frame
+    fn hand_over_rate(&mut self, d: &Design<T>, delta: f64) {
+        let (mut t1, mut t2) = self.theta(d);
+        t1[3] -= delta;
+        t2[3] += delta;
+        if t1.iter().chain(t2.iter()).any(|v| !v.is_finite()) {
+            return;
+        }
+        self.rows.relinearize(&t1, &t2, d.units.om_ref);
+        self.lin.move_to(t1, t2);
+        self.rls1.set_estimate([T::ZERO; 8]);
+        self.rls2.set_estimate([T::ZERO; 6]);
     }
 
     /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns
@@ -337,6 +397,7 @@ impl<T: Real> State<T> {
             health,
             events,
             updated,
+            rate: self.rate.output(&d.rate),
         }
     }
 }

@@ -88,6 +88,8 @@ enum Command {
     /// Soak benchmark: hours of the f32 core with the dither off after convergence, and
     /// on; writes DIR/soak.json and DIR/soak.md.
     Soak(cmd::soak::Args),
+    /// The rate channel's datasheet: step, chirp (bandwidth), sines, ±300 °/s ramp, g-sensitivity, noise vs CRLB.
+    RateResponse(cmd::rate_response::Args),
 }
 
 fn main() -> ExitCode {
@@ -135,6 +137,7 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Demo(a) => demo::exec(a, ctx),
         Command::Faults(a) => faults::exec(a, ctx),
         Command::Soak(a) => soak::exec(a, ctx),
+        Command::RateResponse(a) => rate_response::exec(a, ctx),
     }
 }
 

@@ -12,6 +12,7 @@ pub mod lockin;
 pub mod par;
 pub mod plant;
 pub mod plot;
+pub mod rate_response;
 pub mod record;
 pub mod report;
 pub mod results;

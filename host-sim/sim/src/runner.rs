@@ -291,6 +291,7 @@ pub fn closed_loop_hooked<T: Real>(
     let n = (sc.duration_s * fs).round() as u64;
     let accel_si = L0_M * w0 * w0;
     let controls = sc.control_events();
+    let mid_theta = sc.has_rate_profile();
     let mut next_ctrl = 0usize;
     let mut pump_hz = est.initial_pump_hz();
     // the core's multiplier on the pump voltage scale (the amplitude part of the dither)
@@ -353,9 +354,16 @@ pub fn closed_loop_hooked<T: Real>(
             break;
         }
         let pa1 = sc.plant_at(t_next);
+        // θ held over the interval: at its start, or (a sine or chirp of the rate) at
+        // its midpoint
+        let held = if mid_theta {
+            sc.plant_at(0.5 * (t + t_next))
+        } else {
+            pa
+        };
         let mut theta = Theta {
-            drive: pa.theta_drive,
-            sense: pa.theta_sense,
+            drive: held.theta_drive,
+            sense: held.theta_sense,
         };
         if fx.tcf_ppm_k != 0.0 {
             // the die temperature over the interval, at its midpoint
@@ -448,12 +456,15 @@ pub fn simulate<T: Real>(
                 phys_true: ls.plant.phys,
                 phys_est: phys,
                 rate_dps_true: ls.plant.rate_dps,
-                rate_dps_est: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
+                rate_dps_est: ls.out.rate.rate_dps,
                 drive_amp_um: ls.lockin.x_abs(1),
                 sense_amp_um: ls.lockin.y_abs(1),
                 health: ls.out.health.bits(),
                 resets: counters.resets_drive + counters.resets_sense,
                 bad_samples: counters.bad_samples,
+                rate_dps_slow: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
+                quadrature_dps: ls.out.rate.quadrature_dps,
+                rate_valid: ls.out.rate.valid,
             });
             for (bit, what) in EVENT_NAMES {
                 if ls.out.events & bit != 0 {
@@ -526,6 +537,7 @@ fn describe(k: &EventKind) -> String {
             format!("retune {}", if *enabled { "allowed" } else { "forbidden" })
         }
         EventKind::PumpScale { s, ramp_s } => format!("pump scale → {s} over {ramp_s} s"),
+        EventKind::RateSine { .. } | EventKind::RateChirp { .. } => k.to_string(),
     }
 }
 

@@ -77,7 +77,7 @@ mod tests;
 mod validate;
 
 pub use error::{ScenarioError, ScenarioErrorKind};
-pub use events::{EventKind, EventSpec};
+pub use events::{EventKind, EventSpec, chirp_phase};
 use locate::describe;
 pub use spec::{
     EstimatorSpec, MeasureRun, MeasureSpec, NominalSpec, PlantAt, PlantOverrides, PlantParam,
@@ -240,6 +240,14 @@ impl Scenario {
             })
             .unwrap_or(1.0);
 
+        // sines and chirps of the rate add to rate_dps (and their slope to γ′)
+        for e in &self.events {
+            if e.t_s <= t_s {
+                let (r, slope) = e.kind.rate_profile_at(t_s - e.t_s);
+                p.rate_dps += r;
+                rate_slope += slope;
+            }
+        }
         let w0 = self.omega0_rad_s();
         let gamma = physics::gamma_from_rate_dps(p.rate_dps, w0);
         let gamma_p = (p.rate_accel_dps2 + rate_slope).to_radians() / (w0 * w0);
@@ -333,6 +341,18 @@ impl Scenario {
             }
             _ => None,
         }
+    }
+
+    /// Whether the scenario moves the rate with a `rate_sine` or `rate_chirp` (the
+    /// closed loop then holds θ over each sample interval at its midpoint, not its start:
+    /// the held rate has no half-sample delay against the continuous one).
+    pub fn has_rate_profile(&self) -> bool {
+        self.events.iter().any(|e| {
+            matches!(
+                e.kind,
+                EventKind::RateSine { .. } | EventKind::RateChirp { .. }
+            )
+        })
     }
 
     /// The `pump_jump`, `dither`, `retune` and `pump_scale` events, time-sorted.

@@ -80,7 +80,7 @@ pub struct TraceRow {
     pub phys_est: [f64; 12],
     /// True angular rate, °/s.
     pub rate_dps_true: f64,
-    /// Estimated angular rate, °/s.
+    /// Estimated angular rate, °/s: the fast rate channel (every sample).
     pub rate_dps_est: f64,
     /// Drive fundamental amplitude |A1| from the lock-in, µm.
     pub drive_amp_um: f64,
@@ -92,6 +92,13 @@ pub struct TraceRow {
     pub resets: u32,
     /// Cumulative count of samples flagged as bad input and skipped.
     pub bad_samples: u32,
+    /// The slow rate, °/s: the fast one averaged over the slow RLS memory (γ of
+    /// `phys_est`).
+    pub rate_dps_slow: f64,
+    /// The fast channel's quadrature (ωxy² + γ′) as a rate-equivalent, °/s.
+    pub quadrature_dps: f64,
+    /// The fast rate's validity flag.
+    pub rate_valid: bool,
 }
 
 /// Something that happened during a run (change detected, retune started, ...).

@@ -14,6 +14,7 @@ pub mod list;
 pub mod paper001;
 pub mod paper_claims;
 pub mod paper_raw;
+pub mod rate_response;
 pub mod record;
 pub mod replay;
 pub mod results;

@@ -57,6 +57,29 @@ pub enum EventKind {
         /// Allowed or not.
         enabled: bool,
     },
+    /// A sine of the rate added to `rate_dps` from `t_s` for `duration_s`:
+    /// `amplitude_dps · sin(2π freq_hz (t − t_s))` (starts at zero).
+    RateSine {
+        /// Amplitude, °/s.
+        amplitude_dps: f64,
+        /// Frequency, Hz.
+        freq_hz: f64,
+        /// Length, s.
+        duration_s: f64,
+    },
+    /// An exponential (log-frequency) chirp of the rate added to `rate_dps` from `t_s`:
+    /// `amplitude_dps · sin φ(t)`, instantaneous frequency `freq_hz → freq_end_hz` over
+    /// `duration_s` (constant time per octave).
+    RateChirp {
+        /// Amplitude, °/s.
+        amplitude_dps: f64,
+        /// Start frequency, Hz.
+        freq_hz: f64,
+        /// End frequency, Hz.
+        freq_end_hz: f64,
+        /// Length, s.
+        duration_s: f64,
+    },
     /// Pump voltage scale s = V²/V0², linear ramp from its value at `t_s` over `ramp_s`.
     PumpScale {
         /// Final scale.
@@ -76,13 +99,66 @@ impl EventKind {
             EventKind::Dither { .. } => "dither",
             EventKind::Retune { .. } => "retune",
             EventKind::PumpScale { .. } => "pump_scale",
+            EventKind::RateSine { .. } => "rate_sine",
+            EventKind::RateChirp { .. } => "rate_chirp",
         }
     }
 
     /// Whether the event is a control command (pump, dither, retune) rather than a plant change.
     pub fn is_control(&self) -> bool {
-        !matches!(self, EventKind::Ramp { .. } | EventKind::ScaleTheta { .. })
+        !matches!(
+            self,
+            EventKind::Ramp { .. }
+                | EventKind::ScaleTheta { .. }
+                | EventKind::RateSine { .. }
+                | EventKind::RateChirp { .. }
+        )
     }
+
+    /// The rate this profile event adds at `dt` seconds after its start, and its time
+    /// derivative: (°/s, °/s²). Zero for other kinds and outside the profile.
+    pub fn rate_profile_at(&self, dt: f64) -> (f64, f64) {
+        use std::f64::consts::TAU;
+        match *self {
+            EventKind::RateSine {
+                amplitude_dps,
+                freq_hz,
+                duration_s,
+            } if (0.0..duration_s).contains(&dt) => {
+                let w = TAU * freq_hz;
+                (
+                    amplitude_dps * (w * dt).sin(),
+                    amplitude_dps * w * (w * dt).cos(),
+                )
+            }
+            EventKind::RateChirp {
+                amplitude_dps,
+                freq_hz,
+                freq_end_hz,
+                duration_s,
+            } if (0.0..duration_s).contains(&dt) => {
+                let (phase, f) = chirp_phase(freq_hz, freq_end_hz, duration_s, dt);
+                (
+                    amplitude_dps * phase.sin(),
+                    amplitude_dps * TAU * f * phase.cos(),
+                )
+            }
+            _ => (0.0, 0.0),
+        }
+    }
+}
+
+/// Phase (rad) and instantaneous frequency (Hz) of an exponential chirp `f0 → f1` over
+/// `dur` seconds, `dt` seconds after its start (a constant frequency when `f1 = f0`).
+pub fn chirp_phase(f0: f64, f1: f64, dur: f64, dt: f64) -> (f64, f64) {
+    use std::f64::consts::TAU;
+    let r = (f1 / f0).ln();
+    if r.abs() < 1e-12 {
+        return (TAU * f0 * dt, f0);
+    }
+    let l = dur / r;
+    let e = (dt / l).exp();
+    (TAU * f0 * l * (e - 1.0), f0 * e)
 }
 
 impl fmt::Display for EventKind {
@@ -116,6 +192,23 @@ impl fmt::Display for EventKind {
             EventKind::PumpScale { s, ramp_s } => {
                 write!(f, "pump scale → {s} over {ramp_s} s")
             }
+            EventKind::RateSine {
+                amplitude_dps,
+                freq_hz,
+                duration_s,
+            } => write!(
+                f,
+                "rate sine ±{amplitude_dps} °/s at {freq_hz} Hz for {duration_s} s"
+            ),
+            EventKind::RateChirp {
+                amplitude_dps,
+                freq_hz,
+                freq_end_hz,
+                duration_s,
+            } => write!(
+                f,
+                "rate chirp ±{amplitude_dps} °/s, {freq_hz} → {freq_end_hz} Hz over {duration_s} s"
+            ),
         }
     }
 }
@@ -136,16 +229,29 @@ pub(super) struct RawEvent {
     s: Option<f64>,
     ramp_s: Option<f64>,
     pump_hz: Option<f64>,
+    amplitude_dps: Option<f64>,
+    freq_hz: Option<f64>,
+    freq_end_hz: Option<f64>,
 }
 
 /// Event kinds with their required and optional keys (besides `t_s` and `kind`).
-pub(super) const EVENT_KINDS: [(&str, &[&str], &[&str]); 6] = [
+pub(super) const EVENT_KINDS: [(&str, &[&str], &[&str]); 8] = [
     ("ramp", &["param", "to"], &["duration_s"]),
     ("scale_theta", &["factor"], &[]),
     ("pump_jump", &[], &["centre_hz", "to_sense_resonance"]),
     ("dither", &["enabled"], &["pump_hz"]),
     ("retune", &["enabled"], &[]),
     ("pump_scale", &["s"], &["ramp_s"]),
+    (
+        "rate_sine",
+        &["amplitude_dps", "freq_hz", "duration_s"],
+        &[],
+    ),
+    (
+        "rate_chirp",
+        &["amplitude_dps", "freq_hz", "freq_end_hz", "duration_s"],
+        &[],
+    ),
 ];
 
 impl RawEvent {
@@ -166,6 +272,9 @@ impl RawEvent {
         add("s", self.s.is_some());
         add("ramp_s", self.ramp_s.is_some());
         add("pump_hz", self.pump_hz.is_some());
+        add("amplitude_dps", self.amplitude_dps.is_some());
+        add("freq_hz", self.freq_hz.is_some());
+        add("freq_end_hz", self.freq_end_hz.is_some());
         keys
     }
 
@@ -251,6 +360,17 @@ impl RawEvent {
             },
             "retune" => EventKind::Retune {
                 enabled: self.enabled.unwrap_or(false),
+            },
+            "rate_sine" => EventKind::RateSine {
+                amplitude_dps: self.amplitude_dps.unwrap_or(f64::NAN),
+                freq_hz: self.freq_hz.unwrap_or(f64::NAN),
+                duration_s: self.duration_s.unwrap_or(f64::NAN),
+            },
+            "rate_chirp" => EventKind::RateChirp {
+                amplitude_dps: self.amplitude_dps.unwrap_or(f64::NAN),
+                freq_hz: self.freq_hz.unwrap_or(f64::NAN),
+                freq_end_hz: self.freq_end_hz.unwrap_or(f64::NAN),
+                duration_s: self.duration_s.unwrap_or(f64::NAN),
             },
             _ => EventKind::PumpScale {
                 s: self.s.unwrap_or(f64::NAN),

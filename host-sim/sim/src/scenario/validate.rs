@@ -153,6 +153,26 @@ impl Scenario {
                     non_negative(a, at("pump_hz"))?;
                 }
                 EventKind::Dither { .. } | EventKind::Retune { .. } => {}
+                EventKind::RateSine {
+                    amplitude_dps,
+                    freq_hz,
+                    duration_s,
+                } => {
+                    finite(amplitude_dps, at("amplitude_dps"))?;
+                    positive(freq_hz, at("freq_hz"))?;
+                    positive(duration_s, at("duration_s"))?;
+                }
+                EventKind::RateChirp {
+                    amplitude_dps,
+                    freq_hz,
+                    freq_end_hz,
+                    duration_s,
+                } => {
+                    finite(amplitude_dps, at("amplitude_dps"))?;
+                    positive(freq_hz, at("freq_hz"))?;
+                    positive(freq_end_hz, at("freq_end_hz"))?;
+                    positive(duration_s, at("duration_s"))?;
+                }
             }
         }
         Ok(())

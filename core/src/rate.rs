@@ -1,0 +1,477 @@
+//! The fast rate channel: the angular rate every sample, from the sense fundamental row
+//! *given* the slow parameters, separate from the slow identification.
+//!
+//! # Why a second channel
+//!
+//! The rate lives in θ14 = −(μxy − 2γ) and θ24 = −(μxy + 2γ). The slow RLS (memory
+//! λ = 0.999 ≈ 2 s, 10 Hz state-variable filter) is right only while the rate stands
+//! still.
+//!
+//! # The fast row
+//!
+//! The sense fundamental (DERIVATION §2, k = 1), filtered by a wide-band state-variable
+//! filter of its own (`Λf = (D + wf)²`, `wf = 2π·rate.svf_hz`, the same FOH-exact
+//! realisation as the slow bank, [`crate::svf`]):
+//!
+//! ```text
+//! F2(B) + 2i F1(ωB) − θ21 F1(B) + F0(v)  =  θ23 F0(A) + θ24 [F1(A) + i F0(ωA)]
+//! v = −i ω′B − (ω² + θ22) B − i θ21 ωB − θ25 [Y³]₁
+//! ```
+//!
+//! with θ21, θ22, θ25 and θ23 from the slow RLS. The Coriolis column `c24 ≈ iωA` and the
+//! quadrature column `c23 = A` are orthogonal: θ24 is the weighted least squares along
+//! `c24` given θ23, and what is left along `c23` is the instantaneous quadrature
+//! `−θ23 = ωxy² + γ′`. The left side inverts the identified sense dynamics (the sense mode
+//! alone is a ≈ 5 Hz low-pass, f/2Q): the rate's transfer is `F0` (two real poles at `wf`)
+//! times the lock-in low-pass; the price is noise, which grows with frequency as the
+//! inverse of the sense dynamics (priced by the CRLB of `paragyro-sim rate-response`). The
+//! large terms are combined before filtering (`ω² + θ22` from the small precomputed
+//! `ω_ref² + θ22n`), as in [`crate::rows`], so `f32` keeps the precision.
+//!
+//! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2` with `μ̂xy = −(θ14 + θ24)/2` of the slow RLS.
+//!
+//! # Keeping the slow identification out of rate transients
+//!
+//! The slow rows resolve θ24 to ~1e-8 per sample (0.02 °/s): a rate that moves makes them
+//! inconsistent and fires the change detector. A continuous hand-over (forming the slow
+//! rows with the fast rate) was tried and is not in this version: the fast row's own
+//! model error at the pump dither (≈ 0.6 °/s at 5 Hz with `svf_hz = 150`, noise-free, with
+//! the true θ) and the loop through the slow θ made the slow rows diverge on a 50 °/s²
+//! ramp (issue 10's note). What is here:
+//!
+//! * a second, narrower copy of the row (corner `rate.coupling_hz`, its dither error
+//!   ≈ 0.03 °/s) watches the rate: while its acceleration is above `rate.gate_accel_dps2`
+//!   or it differs from the slow RLS's rate by more than `rate.gate_dev_dps`, the slow
+//!   RLS is gated (no update, no detector), and for `rate.gate_s` after — provided its
+//!   quadrature agrees with the slow θ23 to the same tolerance: a drift of the device
+//!   (ωy², damping) moves both directions of the row and is left to the slow RLS;
+//! * at the end of such a transient the slow linearisation point takes the new rate from
+//!   the narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 averaged over the quiet time minus
+//!   the slow θ24), so the slow rows continue consistent instead of seeing a step.
+//!
+//! Slow rate moves (below the acceleration threshold) are still followed by the slow RLS
+//! as before.
+//!
+//! # Validity
+//!
+//! The rate is valid when this sample's inputs are valid, the drive is locked, the slow
+//! identification has settled at least once since start-up and no change of the device
+//! is pending (the slow θ the row relies on are being re-identified), the fast row is
+//! solvable (|A1| above the lock threshold) and |rate| ≤ `rate.full_scale_dps`.
+//!
+//! Never panics, never allocates; a non-finite solution is skipped and the last value
+//! held.
+
+use crate::complex::Cplx;
+use crate::config::Config;
+use crate::physics::theta_from_physical;
+use crate::real::Real;
+use crate::rows::{Envelopes, Known};
+use crate::svf::{CSvfState, SvfCoeffs};
+
+/// The fast channel's design (built once from the configuration).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RateDesign<T> {
+    svf: SvfCoeffs<T>,
+    /// The narrow channel's filter (corner `rate.coupling_hz`).
+    svf_cpl: SvfCoeffs<T>,
+    /// The narrow channel's θ24 is averaged over the last `quiet_len` samples of a gate.
+    quiet_len: u64,
+    /// θ23 and γ of the design's nominal (the outputs before the first solution).
+    th23_ref: T,
+    gamma_ref: T,
+    /// γ → °/s (ω0·180/π).
+    to_dps: f64,
+    /// 1/Ts (per τ): the derivative of the fast rate.
+    inv_ts: T,
+    /// EWMA weight of the slow averages (1 − λ of the slow RLS).
+    alpha_slow: T,
+    /// Full scale in γ.
+    full_scale: T,
+    /// The slow-RLS gate: |γ′| threshold (per τ²) and length (samples).
+    gate_accel: T,
+    gate_len: u64,
+    /// The slow-RLS gate: |θ24 narrow − θ24 slow| threshold (= 2·rate difference).
+    gate_dev: T,
+    /// (lock threshold in L0)²: below it the fast row is not solved.
+    min_amp2: T,
+    /// 1/(2ω_ref): quadrature coefficient → rate-equivalent γ.
+    inv_2om: T,
+    /// ω_ref² (f64: the nominal constant ω_ref² + θ22n is formed in f64).
+    om_ref2: f64,
+}
+
+impl<T: Real> RateDesign<T> {
+    /// From a validated configuration.
+    #[inline(never)] // set-up only: its own frame
+    pub fn of(cfg: &Config) -> Self {
+        let omega0 = cfg.omega0_rad_s();
+        let ts = omega0 / cfg.fs_hz;
+        let wf = 2.0 * core::f64::consts::PI * cfg.rate.svf_hz / omega0;
+        let wc = 2.0 * core::f64::consts::PI * cfg.rate.coupling_hz / omega0;
+        let (_, th2) = theta_from_physical(&cfg.nominal);
+        let om_ref = cfg.pump_centre_hz / (2.0 * cfg.f0_hz);
+        let to_dps = omega0 * (180.0 / core::f64::consts::PI);
+        let lock = cfg.retune.lock_min_um / cfg.l0_um;
+        RateDesign {
+            svf: SvfCoeffs::new(wf, ts),
+            svf_cpl: SvfCoeffs::new(wc, ts),
+            quiet_len: (libm::round(cfg.rate.gate_s * cfg.fs_hz / 3.0) as u64).max(1),
+            th23_ref: T::from_f64(th2[2]),
+            gamma_ref: T::from_f64(cfg.nominal.gamma),
+            to_dps,
+            inv_ts: T::from_f64(1.0 / ts),
+            alpha_slow: T::from_f64(1.0 - cfg.rls.forgetting),
+            full_scale: T::from_f64(cfg.rate.full_scale_dps / to_dps),
+            gate_accel: T::from_f64(cfg.rate.gate_accel_dps2 / to_dps / omega0),
+            gate_len: libm::round(cfg.rate.gate_s * cfg.fs_hz).max(0.0) as u64,
+            gate_dev: T::from_f64(2.0 * cfg.rate.gate_dev_dps / to_dps),
+            min_amp2: T::from_f64(lock * lock),
+            inv_2om: T::from_f64(0.5 / om_ref),
+            om_ref2: om_ref * om_ref,
+        }
+    }
+
+    /// γ → °/s.
+    pub fn to_dps(&self) -> f64 {
+        self.to_dps
+    }
+}
+
+/// The slow parameters the fast row needs, in `T` (the nominal part is refreshed when
+/// the linearisation point moves; the RLS deviation is added every sample).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SlowTheta<T> {
+    /// θ21.
+    pub th21: T,
+    /// ω_ref² + θ22.
+    pub c22: T,
+    /// θ23 (quadrature prior).
+    pub th23: T,
+    /// θ25.
+    pub th25: T,
+    /// μxy = −(θ14 + θ24)/2.
+    pub mu_xy: T,
+    /// θ24 (the slow RLS's own, total).
+    pub th24: T,
+}
+
+/// The nominal part of [`SlowTheta`] (θ_nom in `T`, formed in `f64` once per
+/// re-linearisation).
+#[derive(Clone, Copy, Debug, Default)]
+struct NominalSlow<T> {
+    th21: T,
+    c22: T,
+    th23: T,
+    th25: T,
+    mu_xy: T,
+    th24: T,
+    /// The θ_nom components it was formed from (bit patterns; `None`: not yet).
+    stamp: Option<[u64; 6]>,
+}
+
+/// The unfiltered signals of the fast row at one sample.
+#[derive(Clone, Copy, Debug, Default)]
+struct RowSignals<T> {
+    a: Cplx<T>,
+    b: Cplx<T>,
+    oma: Cplx<T>,
+    omb: Cplx<T>,
+    v: Cplx<T>,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct FastFilters<T> {
+    b: CSvfState<T>,
+    omb: CSvfState<T>,
+    v: CSvfState<T>,
+    a: CSvfState<T>,
+    oma: CSvfState<T>,
+}
+
+impl<T: Real> FastFilters<T> {
+    fn at_rest(s: &RowSignals<T>) -> Self {
+        FastFilters {
+            b: CSvfState::at_rest(s.b),
+            omb: CSvfState::at_rest(s.omb),
+            v: CSvfState::at_rest(s.v),
+            a: CSvfState::at_rest(s.a),
+            oma: CSvfState::at_rest(s.oma),
+        }
+    }
+
+    /// Filters one sample and solves the row: (θ24, θ23, |c23|²). θ24 is the weighted
+    /// least squares along the Coriolis column given θ23 = the slow prior; θ23 is then
+    /// what is left along the quadrature column.
+    #[inline(never)] // twice per tick (wide and narrow): one copy of the code (flash)
+    fn solve(&mut self, c: &SvfCoeffs<T>, s: &RowSignals<T>, th: &SlowTheta<T>) -> (T, T, T) {
+        let fb = self.b.update(c, s.b);
+        let fomb = self.omb.update(c, s.omb);
+        let fv = self.v.update(c, s.v);
+        let fa = self.a.update(c, s.a);
+        let foma = self.oma.update(c, s.oma);
+        let z = fb.f2 + fomb.f1.scale(T::from_f64(2.0)).mul_i() - fb.f1.scale(th.th21) + fv.f0;
+        let c23 = fa.f0;
+        let c24 = fa.f1 + foma.f0.mul_i();
+        let r = z - c23.scale(th.th23);
+        let t24 = (c24.re * r.re + c24.im * r.im) / c24.norm_sqr();
+        let q = z - c24.scale(t24);
+        let n23 = c23.norm_sqr();
+        let t23 = (c23.re * q.re + c23.im * q.im) / n23;
+        (t24, t23, n23)
+    }
+}
+
+/// What the fast channel produced at the last sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RateEstimate<T> {
+    /// Fast γ (rate in ω0 units).
+    pub gamma: T,
+    /// Slow γ: the fast one averaged over the slow RLS memory.
+    pub gamma_slow: T,
+    /// Fast quadrature −θ23 = ωxy² + γ′ (non-dimensional).
+    pub quad: T,
+    /// The fast row was solved at this sample (else the last values are held).
+    pub solved: bool,
+}
+
+/// The fast channel's state.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RateState<T> {
+    f: FastFilters<T>,
+    /// The same row through the narrow channel's filter.
+    fc: FastFilters<T>,
+    started: bool,
+    nom: NominalSlow<T>,
+    est: RateEstimate<T>,
+    /// The narrow channel's last γ (its derivative is γ′), and the sum and count of its
+    /// θ24 over the last third of a gate.
+    gamma_cpl: T,
+    quiet_sum: T,
+    quiet_n: u32,
+    /// The first solution has been made (the derivative starts from it).
+    primed: bool,
+    /// The slow RLS is gated until this sample (the rate accelerated); the hand-over of
+    /// the new rate is due when the gate ends.
+    gate_until: u64,
+    handover_due: bool,
+    /// The slow identification has settled once since start-up.
+    settled_once: bool,
+    valid: bool,
+}
+
+impl<T: Real> RateState<T> {
+    /// The start-up state: filters at rest at the first sample, the rate at the design's
+    /// reference until the first solution.
+    pub fn new(d: &RateDesign<T>) -> Self {
+        RateState {
+            est: RateEstimate {
+                gamma: d.gamma_ref,
+                gamma_slow: d.gamma_ref,
+                quad: -d.th23_ref,
+                solved: false,
+            },
+            ..RateState::default()
+        }
+    }
+
+    /// Re-forms the nominal part of the slow θ when the linearisation point moved
+    /// (compared bit for bit: integer compares, no soft-float on the chip).
+    #[inline(always)]
+    pub fn refresh_nominal(&mut self, d: &RateDesign<T>, th1n: &[f64; 8], th2n: &[f64; 6]) {
+        let key = [
+            th1n[3].to_bits(),
+            th2n[0].to_bits(),
+            th2n[1].to_bits(),
+            th2n[2].to_bits(),
+            th2n[3].to_bits(),
+            th2n[4].to_bits(),
+        ];
+        if self.nom.stamp == Some(key) {
+            return;
+        }
+        self.nom = NominalSlow {
+            th21: T::from_f64(th2n[0]),
+            c22: T::from_f64(d.om_ref2 + th2n[1]),
+            th23: T::from_f64(th2n[2]),
+            th25: T::from_f64(th2n[4]),
+            mu_xy: T::from_f64(-0.5 * (th1n[3] + th2n[3])),
+            th24: T::from_f64(th2n[3]),
+            stamp: Some(key),
+        };
+    }
+
+    /// The slow θ the fast row needs: the nominal part plus the RLS deviations
+    /// `dev14`, `dev2[..]` (already multiplied by the column scales).
+    #[inline(always)]
+    pub fn slow_theta(&self, dev14: T, dev2: &[T; 6]) -> SlowTheta<T> {
+        let n = &self.nom;
+        SlowTheta {
+            th21: n.th21 + dev2[0],
+            c22: n.c22 + dev2[1],
+            th23: n.th23 + dev2[2],
+            th25: n.th25 + dev2[4],
+            mu_xy: n.mu_xy - T::from_f64(0.5) * (dev14 + dev2[3]),
+            th24: n.th24 + dev2[3],
+        }
+    }
+
+    /// One sample: filters the row in both channels and solves it (when the drive is
+    /// large enough); at sample `k`, while the slow estimate is settled (`slow_settled`),
+    /// a move of the rate (the narrow channel's) gates the slow RLS
+    /// ([`RateState::gates`]). `y3` is the sense cube's fundamental `[Y³]₁` (the rows'
+    /// projection).
+    #[inline(always)]
+    pub fn track(
+        &mut self,
+        d: &RateDesign<T>,
+        e: &Envelopes<T>,
+        kn: &Known<T>,
+        y3: Cplx<T>,
+        th: &SlowTheta<T>,
+        (k, slow_settled): (u64, bool),
+    ) {
+        let (a, b) = (e.a[0], e.b[0]);
+        let om = kn.om;
+        let lin = th.c22 + kn.dom2;
+        let sig = RowSignals {
+            a,
+            b,
+            oma: a.scale(om),
+            omb: b.scale(om),
+            // v = −i ω′B − i θ21 ωB − (ω² + θ22) B − θ25 [Y³]₁ (small by construction)
+            v: -(b.scale(kn.omd) + b.scale(om * th.th21)).mul_i()
+                - b.scale(lin)
+                - y3.scale(th.th25),
+        };
+        if !self.started {
+            self.f = FastFilters::at_rest(&sig);
+            self.fc = FastFilters::at_rest(&sig);
+            self.started = true;
+        }
+        let (t24, t23, n23) = self.f.solve(&d.svf, &sig, th);
+        let (t24c, t23c, _) = self.fc.solve(&d.svf_cpl, &sig, th);
+        let gamma = -(t24 + th.mu_xy) * T::from_f64(0.5);
+        let gamma_c = -(t24c + th.mu_xy) * T::from_f64(0.5);
+        let big = d.full_scale + d.full_scale;
+        let solvable = a.norm_sqr() >= d.min_amp2
+            && n23 > T::ZERO
+            && n23.is_finite()
+            && t23.is_finite()
+            && gamma.is_finite()
+            && gamma_c.is_finite()
+            && gamma.abs() <= big;
+        self.est.solved = solvable;
+        if !solvable {
+            return;
+        }
+        let prev = if self.primed { self.gamma_cpl } else { gamma_c };
+        self.primed = true;
+        self.gamma_cpl = gamma_c;
+        self.est.gamma = gamma;
+        self.est.quad = -t23;
+        self.est.gamma_slow += d.alpha_slow * (gamma - self.est.gamma_slow);
+        let gp = (gamma_c - prev) * d.inv_ts;
+        // the rate moved (fast, or away from the slow RLS's) while the quadrature agrees
+        // with the slow θ23: a drift of the device (ωy², damping) shows in both
+        // directions of the row and is left to the slow RLS
+        let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
+        let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
+        if slow_settled && moved && quad_ok {
+            self.gate_until = k + d.gate_len;
+            self.handover_due = true;
+        }
+        // the average over the gate's last third (restarted whenever the gate moves)
+        if self.handover_due && k < self.gate_until {
+            if self.gate_until - k > d.quiet_len {
+                self.quiet_sum = T::ZERO;
+                self.quiet_n = 0;
+            } else {
+                self.quiet_sum += t24c;
+                self.quiet_n += 1;
+            }
+        }
+    }
+
+    /// The slow RLS must not update at sample `k` (the rate is moving fast).
+    pub fn gates(&self, k: u64) -> bool {
+        k < self.gate_until
+    }
+
+    /// At the first sample after a rate transient: the change of θ24 the slow
+    /// linearisation point must take (the narrow channel's θ24 averaged over the quiet
+    /// time minus the slow θ24 `th24_slow`), once.
+    pub fn take_handover(&mut self, k: u64, th24_slow: T) -> Option<T> {
+        if self.handover_due && k >= self.gate_until {
+            self.handover_due = false;
+            if self.quiet_n > 0 {
+                let mean = self.quiet_sum / T::from_f64(self.quiet_n as f64);
+                let delta = mean - th24_slow;
+                if delta.is_finite() {
+                    return Some(delta);
+                }
+            }
+        }
+        None
+    }
+
+    /// The validity of this sample's rate (module docs), given the health of the step.
+    #[inline(always)]
+    pub fn assess(
+        &mut self,
+        d: &RateDesign<T>,
+        inputs_valid: bool,
+        drive_locked: bool,
+        settled: bool,
+        change_pending: bool,
+    ) -> bool {
+        if settled && !self.settled_once {
+            self.est.gamma_slow = self.est.gamma;
+        }
+        self.settled_once |= settled;
+        self.valid = inputs_valid
+            && drive_locked
+            && self.settled_once
+            && !change_pending
+            && self.est.solved
+            && self.est.gamma.abs() <= d.full_scale;
+        self.valid
+    }
+
+    /// The last estimate.
+    pub fn estimate(&self) -> &RateEstimate<T> {
+        &self.est
+    }
+
+    /// The last validity.
+    pub fn valid(&self) -> bool {
+        self.valid
+    }
+
+    /// The step's output in engineering units.
+    pub fn output(&self, d: &RateDesign<T>) -> RateOutput {
+        let e = &self.est;
+        RateOutput {
+            rate_dps: e.gamma.to_f64() * d.to_dps,
+            rate_slow_dps: e.gamma_slow.to_f64() * d.to_dps,
+            quadrature_dps: (e.quad * d.inv_2om).to_f64() * d.to_dps,
+            valid: self.valid,
+        }
+    }
+}
+
+/// The rate channel's part of a step's output ([`crate::StepOutput::rate`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RateOutput {
+    /// The fast rate, °/s (every sample; see [`RateOutput::valid`]).
+    pub rate_dps: f64,
+    /// The slow rate, °/s: the fast one averaged over the slow RLS memory (≈ 2 s).
+    pub rate_slow_dps: f64,
+    /// The quadrature (ωxy² + γ′) as a rate-equivalent, °/s: ωxy²/(2ω)·ω0 — the error
+    /// term a real gyro fights; it is in phase with the drive displacement, the rate
+    /// with its velocity.
+    pub quadrature_dps: f64,
+    /// Valid: inputs valid, drive locked, slow estimate settled once and no change
+    /// pending, row solvable, within full scale.
+    pub valid: bool,
+}

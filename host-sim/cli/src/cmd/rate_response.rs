@@ -1,0 +1,51 @@
+//! `paragyro-sim rate-response --out DIR`: the rate channel's datasheet on the simulated
+//! device — step, chirp (magnitude, phase, −3 dB bandwidth), sines at 10 and 50 Hz, a
+//! ±300 °/s ramp (scale factor, nonlinearity), g-sensitivity, rate noise against the
+//! Cramér–Rao bound; with `--allan-s` the static Allan runs (long: not for CI).
+
+use std::path::PathBuf;
+
+use super::{Ctx, EXIT_RUN, Failure, PrecisionArg, fail};
+use paragyro_simulator::rate_response::{self, Options};
+
+/// The rate channel's report (report.json, report.md, PNGs).
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Output directory (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Noise seed of every run.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Precision of the core.
+    #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
+    pub precision: PrecisionArg,
+    /// Also run the static Allan runs (0 and 150 °/s) of this many seconds each.
+    #[arg(long, value_name = "S")]
+    pub allan_s: Option<f64>,
+}
+
+/// Runs every measurement and writes the report.
+pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
+    if let Some(s) = a.allan_s
+        && !(s.is_finite() && s >= 10.0)
+    {
+        return Err(fail(EXIT_RUN)(anyhow::anyhow!(
+            "--allan-s must be at least 10 s (got {s})"
+        )));
+    }
+    let o = Options {
+        precision: a.precision.into(),
+        seed: a.seed,
+        allan_s: a.allan_s,
+    };
+    let (report, files) = rate_response::run_all(&o, &a.out).map_err(fail(EXIT_RUN))?;
+    let mut text = format!(
+        "Wrote {} files to {}: {}\n\n",
+        files.len(),
+        a.out.display(),
+        files.join(", ")
+    );
+    text.push_str(&rate_response::markdown(&report));
+    ctx.say(&text)
+}

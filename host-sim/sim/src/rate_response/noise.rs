@@ -1,0 +1,165 @@
+//! Rate noise against the Cramér–Rao bound, and the static Allan runs.
+
+use std::f64::consts::{PI, TAU};
+
+use anyhow::{Result, ensure};
+
+use super::{AllanResult, BASE_DPS, NoiseResult, Options, T0_S, scenario, trace};
+use crate::runner::core_config;
+use crate::trace::TraceRow;
+
+/// Noise: the same static run with and without front-end noise (same seed, same dither),
+/// over 4 s from `T0_S`; the bound for the channel's own transfer and for a brick wall
+/// at `bandwidth_hz`.
+pub fn noise(o: &Options, bandwidth_hz: Option<f64>) -> Result<NoiseResult> {
+    let sc = scenario("", T0_S + 4.0)?;
+    let noisy = trace(&sc, o.precision, o.seed)?;
+    let mut clean_sc = sc.clone();
+    clean_sc.sim.noise_pm_rthz = 0.0;
+    let clean = trace(&clean_sc, o.precision, o.seed)?;
+    let pick = |tr: &[TraceRow]| -> Vec<(f64, f64)> {
+        tr.iter()
+            .filter(|r| r.t_s >= T0_S)
+            .map(|r| (r.rate_dps_est, r.rate_dps_true))
+            .collect()
+    };
+    let (a, b) = (pick(&noisy), pick(&clean));
+    ensure!(
+        a.len() == b.len() && a.len() > 100,
+        "noise runs differ in length"
+    );
+    let d: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x.0 - y.0).collect();
+    let m = d.iter().sum::<f64>() / d.len() as f64;
+    let noise_std = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+    let model = (b.iter().map(|v| (v.0 - v.1).powi(2)).sum::<f64>() / b.len() as f64).sqrt();
+    let cfg = core_config(&sc);
+    let amp = noisy
+        .iter()
+        .filter(|r| r.t_s >= T0_S)
+        .map(|r| r.drive_amp_um)
+        .sum::<f64>()
+        / a.len() as f64;
+    let mu_y = noisy.last().map_or(1e-3, |r| r.phys_true[1]);
+    let b = Bound {
+        omega0: TAU * cfg.f0_hz,
+        // one-sided displacement PSD (L0²/Hz; L0 = 1 µm), ×2 for the mixing with 2e^{−iψ}
+        s_b: 2.0 * (sc.sim.noise_pm_rthz * 1e-6 / cfg.l0_um).powi(2),
+        amp,
+        mu_y,
+        fc: cfg.rate.svf_hz,
+        lpf_hz: cfg.lockin_lpf_hz,
+        lpf_order: cfg.lockin_lpf_order as i32,
+        nyquist: cfg.fs_hz / 2.0,
+    };
+    let to_dps = b.omega0 * 180.0 / PI;
+    let density = b.s_b.sqrt() * (mu_y / 2.0) / amp * to_dps;
+    let same = b.std_dps(|f| b.design_gain(f));
+    let wall = b.std_dps(|f| match bandwidth_hz {
+        Some(bw) if f <= bw => 1.0,
+        Some(_) => 0.0,
+        None => b.design_gain(f),
+    });
+    Ok(NoiseResult {
+        noise_pm_rthz: sc.sim.noise_pm_rthz,
+        noise_std_dps: noise_std,
+        model_err_rms_dps: model,
+        crlb_density_dps_rthz: density,
+        // °/s/√Hz → °/√h: × √(3600 s/h)… a white rate density N (°/s/√Hz, one-sided)
+        // integrates to an angle random walk N/√2 · 60 °/√h
+        crlb_arw_deg_rth: density / 2f64.sqrt() * 60.0,
+        crlb_std_same_g_dps: same,
+        crlb_std_brickwall_dps: wall,
+        ratio_same_g: noise_std / same,
+        ratio_brickwall: noise_std / wall,
+    })
+}
+
+/// The model of the bound (module docs of `rate_response`).
+struct Bound {
+    omega0: f64,
+    s_b: f64,
+    amp: f64,
+    mu_y: f64,
+    fc: f64,
+    lpf_hz: f64,
+    lpf_order: i32,
+    nyquist: f64,
+}
+
+impl Bound {
+    /// |G| of the channel's design: F0 (double pole at fc) × Butterworth lock-in.
+    fn design_gain(&self, f: f64) -> f64 {
+        let x = f / self.fc;
+        1.0 / (1.0 + x * x) / (1.0 + (f / self.lpf_hz).powi(2 * self.lpf_order)).sqrt()
+    }
+
+    /// √∫₀^{fs/2} |G|² S_γ df in °/s.
+    fn std_dps(&self, g: impl Fn(f64) -> f64) -> f64 {
+        let n = 20_000;
+        let df = self.nyquist / n as f64;
+        let mut acc = 0.0;
+        for i in 0..n {
+            let f = (i as f64 + 0.5) * df;
+            let nu = TAU * f / self.omega0;
+            let s_g = self.s_b * (nu * nu + (self.mu_y / 2.0).powi(2)) / (self.amp * self.amp);
+            acc += g(f).powi(2) * s_g * df;
+        }
+        acc.sqrt() * self.omega0 * 180.0 / PI
+    }
+}
+
+/// A static run of `duration_s` at `rate_dps`: overlapping Allan deviation of the fast
+/// rate (valid samples from `T0_S`), ARW from the fit at τ = 1 s, bias instability.
+pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult> {
+    let ev = if rate_dps == BASE_DPS {
+        String::new()
+    } else {
+        format!(
+            "[[event]]\nt_s = 0.0\nkind = \"ramp\"\nparam = \"rate_dps\"\nto = {rate_dps}\nduration_s = 0.0\n"
+        )
+    };
+    let tr = trace(&scenario(&ev, T0_S + duration_s)?, o.precision, o.seed)?;
+    let y: Vec<f64> = tr
+        .iter()
+        .filter(|r| r.t_s >= T0_S)
+        .map(|r| r.rate_dps_est)
+        .collect();
+    let fs = 500.0;
+    let mut tau_s = Vec::new();
+    let mut adev = Vec::new();
+    let mut m = 1usize;
+    // cumulative sum for O(N) per τ
+    let mut c = vec![0.0; y.len() + 1];
+    for (i, v) in y.iter().enumerate() {
+        c[i + 1] = c[i] + v;
+    }
+    while 2 * m < y.len() / 3 {
+        let n = y.len() - 2 * m;
+        let mut s = 0.0;
+        for k in 0..n {
+            let a1 = (c[k + m] - c[k]) / m as f64;
+            let a2 = (c[k + 2 * m] - c[k + m]) / m as f64;
+            s += (a2 - a1).powi(2);
+        }
+        tau_s.push(m as f64 / fs);
+        adev.push((s / (2.0 * n as f64)).sqrt());
+        m = ((m as f64) * 1.25).ceil() as usize;
+    }
+    ensure!(!adev.is_empty(), "Allan run too short");
+    // white rate noise: σ(τ) = N/√τ; N from the point nearest τ = 1 s
+    let i1 = tau_s
+        .iter()
+        .enumerate()
+        .min_by(|a, b| (a.1.ln().abs()).total_cmp(&b.1.ln().abs()))
+        .map_or(0, |x| x.0);
+    let n = adev[i1] * tau_s[i1].sqrt();
+    let min = adev.iter().copied().fold(f64::INFINITY, f64::min);
+    Ok(AllanResult {
+        rate_dps,
+        duration_s,
+        arw_deg_rth: n * 60.0,
+        bias_instability_deg_h: min / 0.664 * 3600.0,
+        tau_s,
+        adev_dps: adev,
+    })
+}
