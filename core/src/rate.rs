@@ -57,7 +57,10 @@
 //! The rate is valid when this sample's inputs are valid, the drive is locked, the slow
 //! identification has settled at least once since start-up and no change of the device
 //! is pending (the slow θ the row relies on are being re-identified), the fast row is
-//! solvable (|A1| above the lock threshold) and |rate| ≤ `rate.full_scale_dps`.
+//! solvable (|A1| above the lock threshold), the drive amplitude is steady (|A1|² at
+//! least [`DRIVE_STEADY2`] of its slow mean: not ringing down) and |rate| ≤
+//! `rate.full_scale_dps`. The narrow channel gates the slow RLS only while the drive is
+//! steady, too.
 //!
 //! Never panics, never allocates; a non-finite solution is skipped and the last value
 //! held.
@@ -233,7 +236,19 @@ pub struct RateEstimate<T> {
     pub quad: T,
     /// The fast row was solved at this sample (else the last values are held).
     pub solved: bool,
+    /// The drive amplitude is steady: |A1|² ≥ [`DRIVE_STEADY2`] × its slow mean (a drive
+    /// ringing down makes the row given the slow θ wrong).
+    pub steady: bool,
 }
+
+/// The floor of |A1|² relative to its slow mean (memory of the slow RLS) above which
+/// the drive counts as steady: amplitude ≥ half its mean. The pump dither alone moves the
+/// amplitude by about ±30 % (1.2–2.1 µm about 1.7 µm in `rate-response`'s base
+/// scenario), so only a deep fall is caught: when the dithers push the drive out of its
+/// parametric band it rings down (`characterise`: |x1| to 0.2–1.3 µm), and the fast row,
+/// given the slow θ, then read 138–169 °/s at a true 150 (issue 10's note on the
+/// diagnosis clash).
+pub const DRIVE_STEADY2: f64 = 0.25;
 
 /// The fast channel's state.
 #[derive(Clone, Copy, Debug, Default)]
@@ -251,6 +266,8 @@ pub struct RateState<T> {
     quiet_n: u32,
     /// The first solution has been made (the derivative starts from it).
     primed: bool,
+    /// Slow mean of |A1|² over solved samples (the steadiness test).
+    amp2_slow: T,
     /// The slow RLS is gated until this sample (the rate accelerated); the hand-over of
     /// the new rate is due when the gate ends.
     gate_until: u64,
@@ -270,6 +287,7 @@ impl<T: Real> RateState<T> {
                 gamma_slow: d.gamma_ref,
                 quad: -d.th23_ref,
                 solved: false,
+                steady: false,
             },
             ..RateState::default()
         }
@@ -363,10 +381,19 @@ impl<T: Real> RateState<T> {
             && gamma.abs() <= big;
         self.est.solved = solvable;
         if !solvable {
+            self.est.steady = false;
             return;
         }
+        let a2 = a.norm_sqr();
         let prev = if self.primed { self.gamma_cpl } else { gamma_c };
+        if !self.primed {
+            self.amp2_slow = a2;
+        }
         self.primed = true;
+        let band = T::from_f64(DRIVE_STEADY2);
+        let steady = a2 >= band * self.amp2_slow;
+        self.amp2_slow += d.alpha_slow * (a2 - self.amp2_slow);
+        self.est.steady = steady;
         self.gamma_cpl = gamma_c;
         self.est.gamma = gamma;
         self.est.quad = -t23;
@@ -377,7 +404,7 @@ impl<T: Real> RateState<T> {
         // directions of the row and is left to the slow RLS
         let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
         let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
-        if slow_settled && moved && quad_ok {
+        if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
             self.handover_due = true;
         }
@@ -434,6 +461,7 @@ impl<T: Real> RateState<T> {
             && self.settled_once
             && !change_pending
             && self.est.solved
+            && self.est.steady
             && self.est.gamma.abs() <= d.full_scale;
         self.valid
     }

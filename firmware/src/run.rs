@@ -339,7 +339,7 @@ impl ReplayCheck {
             retunes: app.estimator().counters().retunes,
             dds_vs_record_max_hz: self.dds_max,
             dds_vs_record_steady_max_hz: self.dds_steady_max,
-            rate_dps: app.estimator().rate_dps(),
+            rate_dps: app.estimator().rate_output().rate_dps,
         }
     }
 }

@@ -50,14 +50,15 @@ impl<T: Real> State<T> {
         let gated = k < d.watch.gate_startup
             || k < self.jump_gate_until
             || k < self.bad_gate_until
-            || self.rate.gates(k);
+            || self.rate.gates(k)
+            || self.lin.pending.handover_pending();
         let updated = !gated && good;
         if updated {
             self.update(d, k, &mut events);
         }
         let wy2 = self.wy2_fast(d);
         let settled = self.settle(d, k, gated, updated, wy2, &mut events);
-        self.maybe_relinearize(d, k, updated);
+        self.maybe_relinearize(d, k, updated, good);
         let health = self.assess(d, good, gated, settled, exc_var, pump_scale);
         let drive_amp = env.a[0].abs();
         let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
@@ -187,25 +188,11 @@ impl<T: Real> State<T> {
             &th,
             (self.k, slow_ok),
         );
+        // the new point: θ24 + Δ, θ14 − Δ (a new rate, μxy unchanged), spread over four
+        // ticks like a re-linearisation (relin.rs), the slow RLS gated until the swap
         if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
-            self.hand_over_rate(d, delta.to_f64());
+            self.lin.pending.request_handover(delta.to_f64());
         }
-    }
-
-    /// Moves the linearisation point to the estimate with θ24 + `delta`, θ14 − `delta`
-    /// (a new rate, μxy unchanged); the row filters follow exactly (`rows.relinearize`).
-    #[inline(never)] // rare: its own frame
-    fn hand_over_rate(&mut self, d: &Design<T>, delta: f64) {
-        let (mut t1, mut t2) = self.theta(d);
-        t1[3] -= delta;
-        t2[3] += delta;
-        if t1.iter().chain(t2.iter()).any(|v| !v.is_finite()) {
-            return;
-        }
-        self.rows.relinearize(&t1, &t2, d.units.om_ref);
-        self.lin.move_to(t1, t2);
-        self.rls1.set_estimate([T::ZERO; 8]);
-        self.rls2.set_estimate([T::ZERO; 6]);
     }
 
     /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns
@@ -285,10 +272,11 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate, spread over four ticks (`relin.rs`).
+    /// a moderate estimate, and a requested rate hand-over happens, spread over four
+    /// ticks (`relin.rs`).
     #[inline(always)]
-    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
-        self.relin_tick(d, k, updated);
+    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool, good: bool) {
+        self.relin_tick(d, k, updated, good);
     }
 
     /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp

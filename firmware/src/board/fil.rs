@@ -189,7 +189,8 @@ fn report(app: &FilApp<'_>, drdy_missing: u32, out: &mut FromFw) {
         f.accel_stuck,
     ];
     out.wy2 = app.estimator().wy2();
-    out.rate_dps = app.estimator().rate_dps();
+    // the fast rate channel (the product's rate output; core::rate)
+    out.rate_dps = app.estimator().rate_output().rate_dps;
     out.pump_hz = app.pump_hz();
 }
 

@@ -30,11 +30,12 @@ where
 {
     let est = app.estimator();
     defmt::info!(
-        "t={=f64}s health={=u32:08b} wy2={=f64} rate={=f64}dps pump={=f64}Hz cmd={=f64}Hz faults={=u8:b}",
+        "t={=f64}s health={=u32:08b} wy2={=f64} rate={=f64}dps rate_valid={=bool} pump={=f64}Hz cmd={=f64}Hz faults={=u8:b}",
         f64::from(k) / fs_hz,
         r.out.health.bits(),
         est.wy2(),
-        est.rate_dps(),
+        r.out.rate.rate_dps,
+        r.out.rate.valid,
         r.pump_hz,
         r.out.pump_hz_next,
         r.faults

@@ -235,7 +235,7 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         drive_amp_ratio: sense_amp_ratio(&sc, &damp),
         bad_ticks: bad,
         pump_end_hz: last_pump,
-        rate_dps_est: est.rate_dps(),
+        rate_dps_est: est.rate_output().rate_dps,
         health_end,
     })
 }
