@@ -783,7 +783,9 @@ where
         // saturating cast: NaN and negatives give 0, overflow u32::MAX
         let k = (x + 0.5) as u32;
         let (lo, hi) = self.guard_words;
-        PumpPlan::from_reference_ftw(k.clamp(lo, hi), sysclk)
+        // `max`/`min`, not `clamp`: the same word for lo ≤ hi (a validated guard), and no
+        // panic path (`clamp`'s `min > max` message kept `core::fmt` in the image)
+        PumpPlan::from_reference_ftw(k.max(lo).min(hi), sysclk)
     }
 
     /// Writes the words that differ from the ones in effect (all of them after an error

@@ -347,8 +347,10 @@ impl AmplitudeWord {
             .saturating_mul(mant)
             .checked_shr(shift)
             .unwrap_or(0);
-        // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)).
-        let asf = four_v.isqrt().saturating_add(1) / 2;
+        // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)); 4v ≤
+        // 4·1023² < 2^22 (s ≤ 1), so a 32-bit root does (`u64::isqrt` linked a 512 B table
+        // and the 64-bit division into the image)
+        let asf = isqrt_below_2_22(u32::try_from(four_v).unwrap_or(u32::MAX)).saturating_add(1) / 2;
         Self(u16::try_from(asf).map_or(ASF_MAX, |a| a.min(ASF_MAX)))
     }
 
@@ -368,6 +370,28 @@ impl AmplitudeWord {
         let [hi, lo] = self.0.to_be_bytes();
         [0x00, ACR_MULTIPLIER_ENABLE | (hi & 0x03), lo]
     }
+}
+
+/// `floor(√n)` for `n < 2^22` (digit by digit, 11 steps, no table, no division); larger
+/// `n` give 2047 (the callers clamp to [`ASF_MAX`] anyway).
+fn isqrt_below_2_22(n: u32) -> u32 {
+    if n >= 1 << 22 {
+        return 2047;
+    }
+    let mut rem = n;
+    let mut root = 0u32;
+    let mut bit = 1u32 << 20;
+    while bit != 0 {
+        let trial = root | bit;
+        if rem >= trial {
+            rem = rem.wrapping_sub(trial);
+            root = (root >> 1) | bit;
+        } else {
+            root >>= 1;
+        }
+        bit >>= 2;
+    }
+    root
 }
 
 /// What the caller must do after buffered writes: pulse the `IO_UPDATE` GPIO once.
@@ -570,6 +594,15 @@ impl<SPI: SpiDevice> Ad9959<SPI> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn isqrt_below_2_22_is_the_integer_square_root_everywhere() {
+        for n in 0..(1u32 << 22) {
+            assert_eq!(isqrt_below_2_22(n), n.isqrt(), "n = {n}");
+        }
+        assert_eq!(isqrt_below_2_22(1 << 22), 2047);
+        assert_eq!(isqrt_below_2_22(u32::MAX), 2047);
+    }
 
     /// The former `f64` form of `from_scale` (the reference).
     fn from_scale_f64(s: f32) -> AmplitudeWord {
