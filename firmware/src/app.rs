@@ -87,7 +87,7 @@ use embedded_hal::spi::SpiDevice;
 use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOutput};
 
 use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
-use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration, LockinUm};
+use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
 use crate::drivers::adxl355::Adxl355;
 
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
@@ -350,6 +350,11 @@ pub struct App<AX, AY, XL, DDS> {
     /// Pump Hz per reference word, `2·f_SYSCLK / 2^32` (exact: a power-of-two scaling),
     /// so that [`App::guard_plan`] needs one `f64` division and no multiplication.
     hz_per_ref_word: f64,
+    /// The guard's ends as `f64` bit patterns: for a validated guard (`0 < min ≤ max`,
+    /// finite) `min ≤ hz ≤ max` ⇔ `min_bits ≤ hz_bits ≤ max_bits` for every `hz` (positive
+    /// doubles order like their bits; negatives, −0 and NaN fall outside), so the tick's
+    /// guard test needs no soft-float comparisons.
+    guard_bits: (u64, u64),
     amplitude: PumpAmplitude,
     /// A lock-in value beyond the core's full scale (saturated codes), µm.
     lockin_beyond_um: f32,
@@ -402,13 +407,6 @@ fn beyond(full_scale: f64) -> f32 {
 const ACCEL_CODE_MAX: i32 = 0x7_FFFF;
 const ACCEL_CODE_MIN: i32 = -0x8_0000;
 
-/// Lock-in values of one axis in channel order (X0, A1re, A1im, A2re, A2im, A3re, A3im).
-fn channels(u: &LockinUm) -> [f32; LOCKIN_CHANNELS] {
-    let [r1, r2, r3] = u.re_um;
-    let [i1, i2, i3] = u.im_um;
-    [u.x0_um, r1, i1, r2, i2, r3, i3]
-}
-
 fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
     let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = x;
     let [y0, b1r, b1i, b2r, b2i, b3r, b3i] = y;
@@ -443,7 +441,7 @@ fn read_axis<S: SpiDevice>(
 ) -> ([f32; LOCKIN_CHANNELS], u8) {
     match adc.read_frame() {
         Ok(frame) => {
-            let mut v = channels(&cal.frame_to_um(&frame));
+            let mut v = cal.channels_um(&frame);
             if !frame.lockin_saturated() {
                 return (v, 0);
             }
@@ -566,6 +564,7 @@ where
             guard: PumpGuard::new(0.0, 0.0),
             guard_words: (0, 0),
             hz_per_ref_word: 1.0,
+            guard_bits: (0, 0),
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: 0.0,
             accel_beyond_mps2: 0.0,
@@ -604,6 +603,7 @@ where
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
         self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
+        self.guard_bits = (guard.min_hz.to_bits(), guard.max_hz.to_bits());
         self.est.rebuild(valid);
         self.cal_x = cal_x;
         self.cal_y = cal_y;
@@ -744,7 +744,7 @@ where
         } else {
             current.map_or(self.guard.midpoint(), |p| p.pump_hz)
         };
-        if !self.guard.contains(target) || !requested.is_finite() {
+        if !self.in_guard(target) || !requested.is_finite() {
             bump(&mut self.counters.guard_clamps);
             faults |= fault::GUARD;
         }
@@ -767,6 +767,13 @@ where
             faults |= fault::DDS;
         }
         faults
+    }
+
+    /// [`PumpGuard::contains`] of the configured guard by its bit patterns (`guard_bits`).
+    fn in_guard(&self, hz: f64) -> bool {
+        let b = hz.to_bits();
+        let (lo, hi) = self.guard_bits;
+        lo <= b && b <= hi
     }
 
     /// [`PumpGuard::plan`] in integer words on the tick path: the nearest reference word
@@ -903,6 +910,50 @@ mod tests {
             .map(|xy| s.push(xy))
             .collect();
         assert_eq!(seen, [false, false, true, true, false, false, true]);
+    }
+
+    /// The tick path's guard test by bit patterns equals `PumpGuard::contains`.
+    #[test]
+    fn guard_test_by_bits_equals_contains() {
+        let cfg = Config::table2();
+        let chips = Chips {
+            adc_x: Ads131m08::new(FailingSpi::always_failing()),
+            adc_y: Ads131m08::new(FailingSpi::always_failing()),
+            accel: Adxl355::new(FailingSpi::always_failing()),
+            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
+        };
+        let guard = PumpGuard::around(cfg.pump_centre_hz, 400.0);
+        let cal = LockinCalibration::UNITY;
+        let app = App::new(chips, &cfg, cal, cal, guard).unwrap();
+        let (lo, hi) = (guard.min_hz, guard.max_hz);
+        let mut probes = vec![
+            lo,
+            hi,
+            0.0,
+            -0.0,
+            -lo,
+            -hi,
+            1e-300,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            0.5 * (lo + hi),
+        ];
+        for e in [lo, hi] {
+            let b = e.to_bits();
+            probes.extend([f64::from_bits(b - 1), f64::from_bits(b + 1)]);
+        }
+        let mut hz = lo - 50.0;
+        while hz < hi + 50.0 {
+            probes.push(hz);
+            hz += 0.37;
+        }
+        for hz in probes {
+            assert_eq!(app.in_guard(hz), guard.contains(hz), "{hz}");
+        }
     }
 
     /// The tick path's integer guard plan picks the very word of `PumpGuard::plan`.

@@ -594,9 +594,17 @@ impl Frame {
             .fold(0u8, |m, (i, _)| m | 1u8.checked_shl(i as u32).unwrap_or(0))
     }
 
-    /// Any lock-in channel (0-6) at full scale.
+    /// Any lock-in channel (0-6) at full scale (= `saturated_mask() & 0x7F != 0`, written
+    /// out without branches).
     pub fn lockin_saturated(&self) -> bool {
-        self.saturated_mask() & 0x7F != 0
+        let [c0, c1, c2, c3, c4, c5, c6, _] = self.codes;
+        c0.is_saturated()
+            | c1.is_saturated()
+            | c2.is_saturated()
+            | c3.is_saturated()
+            | c4.is_saturated()
+            | c5.is_saturated()
+            | c6.is_saturated()
     }
 
     /// Decode 30 received bytes, checking the output CRC.
@@ -807,6 +815,26 @@ impl LockinCalibration {
         }
     }
 
+    /// The lock-in channels of a frame in µm, in code order (`x0, re1, im1, re2, im2, re3,
+    /// im3`), written out: the same values as [`LockinCalibration::to_um`] without the
+    /// loop and the intermediate copies (the tick path).
+    #[inline]
+    pub fn channels_um(&self, frame: &Frame) -> [f32; LOCKIN_CHANNELS] {
+        let [c0, c1, c2, c3, c4, c5, c6, _] = frame.codes;
+        let [s0, s1, s2, s3, s4, s5, s6] = self.um_per_code;
+        let [o0, o1, o2, o3, o4, o5, o6] = self.offset_code;
+        let f = |c: RawCode, o: i32, s: f32| c.get().saturating_sub(o) as f32 * s;
+        [
+            f(c0, o0, s0),
+            f(c1, o1, s1),
+            f(c2, o2, s2),
+            f(c3, o3, s3),
+            f(c4, o4, s4),
+            f(c5, o5, s5),
+            f(c6, o6, s6),
+        ]
+    }
+
     /// Convert the lock-in channels of a frame to µm.
     pub fn frame_to_um(&self, frame: &Frame) -> LockinUm {
         self.to_um(&frame.lockin_codes())
@@ -997,6 +1025,41 @@ mod tests {
             Ok(frame)
         } else {
             Err(CrcError { expected: crc, got })
+        }
+    }
+
+    #[test]
+    fn channels_um_and_lockin_saturated_equal_their_loop_forms() {
+        use super::*;
+        let cal = LockinCalibration {
+            um_per_code: [0.5, -1.25, 3.0e-3, 7.0, 1.0, 2.5e-6, -0.75],
+            offset_code: [0, 100, -100, i32::MAX, i32::MIN, 12345, -7],
+        };
+        let mut x = 0x2545_F491u32;
+        for n in 0..20_000u32 {
+            let mut codes = [RawCode::default(); CHANNELS];
+            for c in codes.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                *c = match x % 7 {
+                    0 => RawCode::POSITIVE_FULL_SCALE,
+                    1 if n % 3 == 0 => RawCode::NEGATIVE_FULL_SCALE,
+                    _ => RawCode::from_u24(x >> 8),
+                };
+            }
+            let f = Frame { response: 0, codes };
+            let u = cal.frame_to_um(&f);
+            let [r1, r2, r3] = u.re_um;
+            let [i1, i2, i3] = u.im_um;
+            let want = [u.x0_um, r1, i1, r2, i2, r3, i3];
+            let got = cal.channels_um(&f);
+            assert!(
+                want.iter()
+                    .zip(got.iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            assert_eq!(f.lockin_saturated(), f.saturated_mask() & 0x7F != 0);
         }
     }
 
