@@ -162,9 +162,7 @@ fn main() -> ! {
         10.MHz(),
         &mut rcc,
     );
-    // the two ADCs share SPI1: an `AtomicDevice` answers a (never expected) nested use
-    // with a `Busy` error, where a `RefCellDevice` would panic (and its panic message kept
-    // `core::fmt` in the image)
+    // the ADCs share SPI1: `AtomicDevice` answers a nested use with `Busy` (no panic path)
     let adc_bus = AtomicCell::new(spi1);
     // GPIO writes are infallible on the STM32F4 (the error type is `Infallible`)
     let Ok(adc_x_dev) = AtomicDevice::new_no_delay(&adc_bus, gpioa.pa4.into_push_pull_output());
@@ -230,8 +228,7 @@ fn main() -> ! {
 
     let mut k: u32 = 0;
     let mut drdy_timeouts: u32 = 0;
-    // u32: 50 ticks of at most 2 ms at 168 MHz are 16.8 M cycles (saturating beyond);
-    // a u64 sum's division linked the 64-bit division routine (≈ 0.9 KB) into the image
+    // u32 (50 ticks of ≤ 2 ms are ≤ 16.8 M cycles): no 64-bit division in the image
     let mut cycles_sum: u32 = 0;
     let mut cycles_max: u32 = 0;
     loop {
