@@ -52,38 +52,49 @@ pub fn butterworth_with(n: usize, wc: f64, sin: fn(f64) -> f64) -> Analog {
     let mut c = [0.0; MAX_ORDER];
     let n = n.clamp(1, MAX_ORDER);
     // section inputs chain: the first section's input is u, each next section's input is
-    // the previous section's output state q.
-    let mut idx = 0usize; // next free state
-    let mut prev_out: Option<usize> = None;
+    // the previous section's output state q. Section k (1-based) holds the states
+    // 2k − 2 (its output q) and 2k − 1 (r); an odd order ends with the state n − 1. The
+    // indices are written from k and n (≤ MAX_ORDER) so that no bounds check is left.
     let pairs = n / 2;
+    // checked writes (`get_mut`): the indices are < n by construction, but the compiler
+    // cannot see it and its bounds checks kept `core::fmt` in the firmware image
+    fn set(m: &mut [[f64; MAX_ORDER]; MAX_ORDER], i: usize, j: usize, v: f64, add: bool) {
+        if let Some(x) = m.get_mut(i).and_then(|row| row.get_mut(j)) {
+            *x = if add { *x + v } else { v };
+        }
+    }
     for k in 1..=pairs {
         // damping of the k-th conjugate pole pair
         let zeta = sin(core::f64::consts::PI * (2 * k - 1) as f64 / (2 * n) as f64);
-        let (q, r) = (idx, idx + 1);
-        idx += 2;
+        let (q, r) = (2 * k - 2, 2 * k - 1);
         // q' = wc r ; r' = wc (u_in - q - 2 zeta r)
-        a[q][r] = wc;
-        a[r][q] = -wc;
-        a[r][r] = -2.0 * zeta * wc;
-        match prev_out {
-            None => b[r] = wc,
-            Some(p) => a[r][p] += wc,
+        set(&mut a, q, r, wc, false);
+        set(&mut a, r, q, -wc, false);
+        set(&mut a, r, r, -2.0 * zeta * wc, false);
+        if k == 1 {
+            if let Some(br) = b.get_mut(r) {
+                *br = wc;
+            }
+        } else {
+            set(&mut a, r, q.saturating_sub(2), wc, true); // the previous section's output
         }
-        prev_out = Some(q);
     }
-    if n % 2 == 1 {
-        let q = idx;
-        idx += 1;
-        a[q][q] = -wc;
-        match prev_out {
-            None => b[q] = wc,
-            Some(p) => a[q][p] += wc,
+    let out = if n % 2 == 1 {
+        let q = n - 1;
+        set(&mut a, q, q, -wc, false);
+        if pairs == 0 {
+            if let Some(bq) = b.get_mut(q) {
+                *bq = wc;
+            }
+        } else {
+            set(&mut a, q, q.saturating_sub(2), wc, true); // (pairs > 0)
         }
-        prev_out = Some(q);
-    }
-    debug_assert_eq!(idx, n);
-    if let Some(p) = prev_out {
-        c[p] = 1.0;
+        q
+    } else {
+        n.saturating_sub(2) // (n ≥ 2 here)
+    };
+    if let Some(co) = c.get_mut(out) {
+        *co = 1.0;
     }
     Analog { n, a, b, c }
 }
@@ -144,6 +155,7 @@ pub fn expm(x: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [[f64; MAXAUG]; MAXAUG] {
 #[inline(never)]
 fn row_times(a: &[f64; MAXAUG], b: &[[f64; MAXAUG]; MAXAUG], m: usize) -> [f64; MAXAUG] {
     let mut row = [0.0; MAXAUG];
+    let m = m.min(MAXAUG); // (≤ MAXAUG already: lets the compiler drop the bounds checks)
     for (aik, bk) in a.iter().zip(b.iter()).take(m) {
         if *aik == 0.0 {
             continue;
@@ -173,7 +185,7 @@ pub struct FohDiscrete {
 /// `svf_discrete` of the prototype).
 #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
 pub fn foh_discretise(sys: &Analog, ts: f64) -> FohDiscrete {
-    let n = sys.n;
+    let n = sys.n.min(MAX_ORDER); // (≤ MAX_ORDER already: no bounds checks below)
     let mut m = [[0.0; MAXAUG]; MAXAUG];
     for i in 0..n {
         for j in 0..n {
@@ -223,8 +235,9 @@ impl<T: Real> ReplicaCoeffs<T> {
     pub fn butterworth(order: usize, wc: f64, ts: f64) -> Self {
         let sys = butterworth_with(order, wc, |a| T::design_cos_sin_f64(a).1);
         let d = foh_discretise(&sys, ts);
+        let dn = d.n.min(MAX_ORDER); // (≤ MAX_ORDER already: no bounds checks below)
         let mut r = ReplicaCoeffs {
-            n: d.n,
+            n: dn,
             phi: [[T::ZERO; MAX_ORDER]; MAX_ORDER],
             g0: [T::ZERO; MAX_ORDER],
             g1: [T::ZERO; MAX_ORDER],
@@ -234,15 +247,15 @@ impl<T: Real> ReplicaCoeffs<T> {
             rest_unit: [T::ZERO; MAX_ORDER],
         };
         let mut cb = 0.0;
-        for i in 0..d.n {
-            for j in 0..d.n {
+        for i in 0..dn {
+            for j in 0..dn {
                 r.phi[i][j] = T::from_f64(d.phi[i][j]);
             }
             r.g0[i] = T::from_f64(d.g0[i]);
             r.g1[i] = T::from_f64(d.g1[i]);
             r.c[i] = T::from_f64(sys.c[i]);
             let mut ca = 0.0;
-            for k in 0..d.n {
+            for k in 0..dn {
                 ca += sys.c[k] * sys.a[k][i];
             }
             r.ca[i] = T::from_f64(ca);
@@ -254,16 +267,16 @@ impl<T: Real> ReplicaCoeffs<T> {
         let mut x = [0.0f64; MAX_ORDER];
         for _ in 0..2000 {
             let mut nx = [0.0f64; MAX_ORDER];
-            for i in 0..d.n {
+            for i in 0..dn {
                 let mut acc = d.g0[i];
-                for j in 0..d.n {
+                for j in 0..dn {
                     acc += d.phi[i][j] * x[j];
                 }
                 nx[i] = acc;
             }
             x = nx;
         }
-        for i in 0..d.n {
+        for i in 0..dn {
             r.rest_unit[i] = T::from_f64(x[i]);
         }
         r

@@ -16,7 +16,6 @@
 
 use crate::real::Real;
 use crate::sample::Sample;
-use heapless::HistoryBuf;
 
 pub use crate::sample::N_LOCKIN_CH;
 
@@ -232,32 +231,121 @@ impl<T: Real> SettleDesign<T> {
     }
 }
 
-/// Settle test on one scalar, sampled at a low rate into a `heapless::HistoryBuf`, in
-/// the estimator's precision `T` (the values are `T` in the first place; in `f64` on
-/// the chip it was ~2k soft-float instructions on every 25th tick).
-#[derive(Clone, Debug, Default)]
+/// Settle test on one scalar, sampled at a low rate into a ring of [`SETTLE_RING`]
+/// values, in the estimator's precision `T` (the values are `T` in the first place; in
+/// `f64` on the chip it was ~2k soft-float instructions on every 25th tick).
+///
+/// Its own ring rather than `heapless::HistoryBuf` (whose `write` has bounds checks, the
+/// last ones on the tick path that kept `core::fmt` in the firmware image), and the
+/// sampling test without a 64-bit division per tick (one every gap, see
+/// [`SettleTest::push`]).
+#[derive(Clone, Debug)]
 pub struct SettleTest<T> {
-    window: HistoryBuf<T, SETTLE_RING>,
+    ring: [T; SETTLE_RING],
+    /// Slot of the next write (`< SETTLE_RING`).
+    at: usize,
+    /// Values held (`≤ SETTLE_RING`).
+    len: usize,
+    /// The next `k` that is a multiple of `every` (after the last sampling test).
+    next_due: u64,
+    /// The `every` that `next_due` belongs to (0: none yet).
+    every: u64,
     /// The verdict, recomputed when a value is pushed (the tick only reads it).
     verdict: bool,
+}
+
+impl<T: Real> Default for SettleTest<T> {
+    fn default() -> Self {
+        SettleTest {
+            ring: [T::ZERO; SETTLE_RING],
+            at: 0,
+            len: 0,
+            next_due: 0,
+            every: 0,
+            verdict: false,
+        }
+    }
+}
+
+/// `n mod d` for `d > 0`: a 32-bit division when both fit (the first 99 days at 500 Hz;
+/// the M4F divides in hardware), else binary long division (64 steps). No 64-bit division
+/// routine (the chip has none, and this is only needed after a gap in the samples).
+fn rem_u64(n: u64, d: u64) -> u64 {
+    if let (Ok(n32), Ok(d32)) = (u32::try_from(n), u32::try_from(d))
+        && d32 != 0
+    {
+        return u64::from(n32 % d32);
+    }
+    let mut r: u64 = 0;
+    for i in (0..64).rev() {
+        let carry = r >> 63;
+        r = (r << 1) | ((n >> i) & 1);
+        // the true value is carry·2^64 + r < 2d: one subtraction brings it below d
+        if carry != 0 || r >= d {
+            r = r.wrapping_sub(d);
+        }
+    }
+    r
 }
 
 impl<T: Real> SettleTest<T> {
     /// Forgets the history.
     pub fn clear(&mut self) {
-        self.window.clear();
+        self.at = 0;
+        self.len = 0;
         self.verdict = false;
+    }
+    /// `k` is a multiple of `every` (> 0). Exact for any sequence of `k`; one comparison
+    /// when `k` is the next multiple or lies between two (the tick path's rising `k`),
+    /// a long division otherwise (after a gap, a new design or a `k` that went back).
+    fn sampled(&mut self, every: u64, k: u64) -> bool {
+        if every == 0 {
+            return k == 0; // a blank design (`u64::is_multiple_of(0)`)
+        }
+        if every == self.every {
+            if k == self.next_due {
+                self.advance(k, every);
+                return true;
+            }
+            // strictly between the multiple before `next_due` and `next_due`
+            if k < self.next_due && self.next_due - k < every {
+                return false;
+            }
+        }
+        let r = rem_u64(k, every);
+        // the next multiple after `k`
+        self.advance(k - r, every);
+        r == 0
+    }
+    /// `next_due` ← the multiple `m + every` (none past `u64::MAX`: the next test then
+    /// takes the long way).
+    fn advance(&mut self, m: u64, every: u64) {
+        match m.checked_add(every) {
+            Some(n) => {
+                self.next_due = n;
+                self.every = every;
+            }
+            None => self.every = 0,
+        }
     }
     /// Feeds the value at sample `k`.
     pub fn push(&mut self, d: &SettleDesign<T>, k: u64, v: T) {
-        if !k.is_multiple_of(d.every) {
+        if !self.sampled(d.every, k) {
             return;
         }
         if !v.is_finite() {
             self.clear();
             return;
         }
-        self.window.write(v);
+        if let Some(slot) = self.ring.get_mut(self.at) {
+            *slot = v;
+        }
+        self.at = if self.at + 1 >= SETTLE_RING {
+            0
+        } else {
+            self.at + 1
+        };
+        self.len = (self.len + 1).min(SETTLE_RING);
         self.verdict = self.evaluate(d);
     }
     /// Settled now.
@@ -265,16 +353,21 @@ impl<T: Real> SettleTest<T> {
         self.verdict
     }
     fn evaluate(&self, d: &SettleDesign<T>) -> bool {
-        if self.window.len() < d.need {
+        if self.len < d.need {
             return false;
         }
         // finite values only (push clears on a non-finite one), so `Real::min/max` agree
-        // with `f64::min/max`, and the span does not depend on the order
+        // with `f64::min/max`, and the span does not depend on the order: the newest
+        // `need` values, walking back from the last write
         let mut lo = T::MAX;
         let mut hi = -T::MAX;
-        for v in self.window.oldest_ordered().rev().take(d.need) {
-            lo = lo.min(*v);
-            hi = hi.max(*v);
+        let mut i = self.at;
+        for _ in 0..d.need {
+            i = if i == 0 { SETTLE_RING - 1 } else { i - 1 };
+            if let Some(&v) = self.ring.get(i) {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
         }
         let scale = hi.abs().max(lo.abs()).max(T::from_f64(1e-30));
         (hi - lo) / scale < d.tol
@@ -285,6 +378,49 @@ impl<T: Real> SettleTest<T> {
 mod tests {
     extern crate std;
     use super::*;
+
+    #[test]
+    fn long_division_remainder_is_exact() {
+        let mut s = 7u64;
+        for _ in 0..20_000 {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let n = s;
+            for d in [1, 2, 3, 25, 1000, 1 << 32, (1 << 63) + 5, u64::MAX, n | 1] {
+                assert_eq!(rem_u64(n, d), n % d, "{n} mod {d}");
+                let small = n >> 40;
+                assert_eq!(rem_u64(small, d), small % d, "{small} mod {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn sampling_test_equals_is_multiple_of_for_any_sequence() {
+        let mut t = SettleTest::<f32>::default();
+        let mut s = 3u64;
+        let mut k = 0u64;
+        let mut every = 25u64;
+        for step in 0..200_000u32 {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            // mostly k + 1; sometimes a gap, a jump back, a new `every`, huge k
+            k = match (s >> 58) as u8 {
+                0 => k.saturating_sub(s >> 50 & 0xFFF),
+                1 => k.saturating_add(s >> 40 & 0xFFFF),
+                2 => u64::MAX - (s >> 40 & 0xFF),
+                3 => 0,
+                _ => k.saturating_add(1),
+            };
+            if step % 5000 == 0 {
+                every = [25, 1, 7, 1000, 0][(step / 5000) as usize % 5];
+            }
+            assert_eq!(
+                t.sampled(every, k),
+                k.is_multiple_of(every),
+                "k {k} every {every}"
+            );
+        }
+    }
 
     fn lcg(s: &mut u64) -> f64 {
         *s = s

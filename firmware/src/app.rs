@@ -87,7 +87,7 @@ use embedded_hal::spi::SpiDevice;
 use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOutput};
 
 use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
-use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration, LockinUm};
+use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
 use crate::drivers::adxl355::Adxl355;
 
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
@@ -350,6 +350,11 @@ pub struct App<AX, AY, XL, DDS> {
     /// Pump Hz per reference word, `2·f_SYSCLK / 2^32` (exact: a power-of-two scaling),
     /// so that [`App::guard_plan`] needs one `f64` division and no multiplication.
     hz_per_ref_word: f64,
+    /// The guard's ends as `f64` bit patterns: for a validated guard (`0 < min ≤ max`,
+    /// finite) `min ≤ hz ≤ max` ⇔ `min_bits ≤ hz_bits ≤ max_bits` for every `hz` (positive
+    /// doubles order like their bits; negatives, −0 and NaN fall outside), so the tick's
+    /// guard test needs no soft-float comparisons.
+    guard_bits: (u64, u64),
     amplitude: PumpAmplitude,
     /// A lock-in value beyond the core's full scale (saturated codes), µm.
     lockin_beyond_um: f32,
@@ -402,13 +407,6 @@ fn beyond(full_scale: f64) -> f32 {
 const ACCEL_CODE_MAX: i32 = 0x7_FFFF;
 const ACCEL_CODE_MIN: i32 = -0x8_0000;
 
-/// Lock-in values of one axis in channel order (X0, A1re, A1im, A2re, A2im, A3re, A3im).
-fn channels(u: &LockinUm) -> [f32; LOCKIN_CHANNELS] {
-    let [r1, r2, r3] = u.re_um;
-    let [i1, i2, i3] = u.im_um;
-    [u.x0_um, r1, i1, r2, i2, r3, i3]
-}
-
 fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
     let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = x;
     let [y0, b1r, b1i, b2r, b2i, b3r, b3i] = y;
@@ -432,6 +430,33 @@ fn bump(c: &mut u32) {
     *c = c.saturating_add(1);
 }
 
+/// `y as u32` (saturating: NaN and negatives give 0, ≥ 2^32 gives `u32::MAX`) from the
+/// bits, with integer operations only: `floor(y)` of a double in [1, 2^32) is its 53-bit
+/// significand shifted right by `1075 − exponent` (on the chip the `as` cast is a library
+/// conversion plus two soft-float comparisons).
+fn f64_as_u32(y: f64) -> u32 {
+    let b = y.to_bits();
+    if b >> 63 != 0 {
+        return 0; // negative (→ 0 when > −1, saturated to 0 below) or a negative NaN
+    }
+    let exp = (b >> 52) as u32; // biased, sign bit clear
+    if exp < 1023 {
+        return 0; // [0, 1)
+    }
+    if exp >= 1023 + 32 {
+        // ≥ 2^32 or ∞ → MAX; NaN → 0
+        return if exp == 0x7FF && b & ((1 << 52) - 1) != 0 {
+            0
+        } else {
+            u32::MAX
+        };
+    }
+    let sig = (b & ((1 << 52) - 1)) | (1 << 52);
+    // exp − 1023 ∈ [0, 31]: shift ∈ [21, 52]
+    let shift = 1075u32.saturating_sub(exp);
+    u32::try_from(sig.checked_shr(shift).unwrap_or(0)).unwrap_or(u32::MAX)
+}
+
 /// One axis: the frame in µm, saturated channels beyond the core's full scale, or all
 /// NaN if the frame was lost. Returns the values and the fault bits.
 fn read_axis<S: SpiDevice>(
@@ -443,7 +468,7 @@ fn read_axis<S: SpiDevice>(
 ) -> ([f32; LOCKIN_CHANNELS], u8) {
     match adc.read_frame() {
         Ok(frame) => {
-            let mut v = channels(&cal.frame_to_um(&frame));
+            let mut v = cal.channels_um(&frame);
             if !frame.lockin_saturated() {
                 return (v, 0);
             }
@@ -566,6 +591,7 @@ where
             guard: PumpGuard::new(0.0, 0.0),
             guard_words: (0, 0),
             hz_per_ref_word: 1.0,
+            guard_bits: (0, 0),
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: 0.0,
             accel_beyond_mps2: 0.0,
@@ -604,6 +630,7 @@ where
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
         self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
+        self.guard_bits = (guard.min_hz.to_bits(), guard.max_hz.to_bits());
         self.est.rebuild(valid);
         self.cal_x = cal_x;
         self.cal_y = cal_y;
@@ -744,7 +771,7 @@ where
         } else {
             current.map_or(self.guard.midpoint(), |p| p.pump_hz)
         };
-        if !self.guard.contains(target) || !requested.is_finite() {
+        if !self.in_guard(target) || !requested.is_finite() {
             bump(&mut self.counters.guard_clamps);
             faults |= fault::GUARD;
         }
@@ -769,6 +796,13 @@ where
         faults
     }
 
+    /// [`PumpGuard::contains`] of the configured guard by its bit patterns (`guard_bits`).
+    fn in_guard(&self, hz: f64) -> bool {
+        let b = hz.to_bits();
+        let (lo, hi) = self.guard_bits;
+        lo <= b && b <= hi
+    }
+
     /// [`PumpGuard::plan`] in integer words on the tick path: the nearest reference word
     /// `k = round(f/2 · 2^32 / f_SYSCLK)` (the same `f64` operations as
     /// [`ad9959::ftw_from_hz`]: the power-of-two scalings are exact), clamped to the
@@ -780,10 +814,13 @@ where
         // = pump_hz · 0.5 · 2^32 / sysclk bit for bit: both divide the same exact
         // quotient's operands scaled by powers of two, rounded once
         let x = pump_hz / self.hz_per_ref_word;
-        // saturating cast: NaN and negatives give 0, overflow u32::MAX
-        let k = (x + 0.5) as u32;
+        // saturating cast: NaN and negatives give 0, overflow u32::MAX (from the bits: the
+        // `as` cast costs two soft-float comparisons besides the conversion)
+        let k = f64_as_u32(x + 0.5);
         let (lo, hi) = self.guard_words;
-        PumpPlan::from_reference_ftw(k.clamp(lo, hi), sysclk)
+        // `max`/`min`, not `clamp`: the same word for lo ≤ hi (a validated guard), and no
+        // panic path (`clamp`'s `min > max` message kept `core::fmt` in the image)
+        PumpPlan::from_reference_ftw(k.max(lo).min(hi), sysclk)
     }
 
     /// Writes the words that differ from the ones in effect (all of them after an error
@@ -810,7 +847,13 @@ where
                 if self.chips.dds.take_io_update().is_some() {
                     io.pulse();
                 }
-                let pump_hz = same_word.map_or_else(|| plan.pump_hz(), |p| p.pump_hz);
+                // = plan.pump_hz() bit for bit: 2k·f_SYSCLK/2^32 = k·(2·f_SYSCLK/2^32), the
+                // same product rounded once and scaled by powers of two (one multiplication
+                // fewer)
+                let pump_hz = same_word.map_or_else(
+                    || f64::from(plan.reference_ftw()) * self.hz_per_ref_word,
+                    |p| p.pump_hz,
+                );
                 self.pump = Some(InEffect { plan, asf, pump_hz });
                 self.dirty = false;
                 Ok(())
@@ -901,6 +944,115 @@ mod tests {
             .map(|xy| s.push(xy))
             .collect();
         assert_eq!(seen, [false, false, true, true, false, false, true]);
+    }
+
+    /// `f64_as_u32` is the saturating `as u32` cast.
+    #[test]
+    fn f64_as_u32_equals_the_cast() {
+        let mut probes = vec![
+            0.0,
+            -0.0,
+            0.5,
+            0.999_999_999,
+            1.0,
+            1.5,
+            2.0,
+            4_294_967_295.0,
+            4_294_967_295.5,
+            4_294_967_296.0,
+            1e300,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            -0.5,
+            -1.0,
+            -1e300,
+            f64::MIN_POSITIVE,
+            5e-324,
+        ];
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..200_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            probes.push(f64::from_bits(x));
+            probes.push((x >> 11) as f64 / (1u64 << 21) as f64); // [0, 2^32)
+        }
+        for e in 0..=33 {
+            let p = (1u64 << e) as f64;
+            for b in [p.to_bits() - 1, p.to_bits(), p.to_bits() + 1] {
+                probes.push(f64::from_bits(b));
+            }
+        }
+        for y in probes {
+            assert_eq!(f64_as_u32(y), y as u32, "{y:e} ({:#x})", y.to_bits());
+        }
+    }
+
+    /// The realised pump from the reference word and `hz_per_ref_word` equals
+    /// `PumpPlan::pump_hz` bit for bit.
+    #[test]
+    fn pump_hz_from_the_reference_word_equals_the_plan() {
+        for sysclk in [DEFAULT_SYSCLK_HZ, 480e6, 25e6 * 17.0, 123_456_789.0] {
+            let h = sysclk * (2.0 / FTW_SCALE);
+            for k in (1..(1u32 << 31) / 3)
+                .step_by(99_991)
+                .chain([1, 2, (1 << 31) / 3 - 1])
+            {
+                let plan = PumpPlan::from_reference_ftw(k, sysclk).unwrap();
+                assert_eq!(
+                    (f64::from(k) * h).to_bits(),
+                    plan.pump_hz().to_bits(),
+                    "k {k}, sysclk {sysclk}"
+                );
+            }
+        }
+    }
+
+    /// The tick path's guard test by bit patterns equals `PumpGuard::contains`.
+    #[test]
+    fn guard_test_by_bits_equals_contains() {
+        let cfg = Config::table2();
+        let chips = Chips {
+            adc_x: Ads131m08::new(FailingSpi::always_failing()),
+            adc_y: Ads131m08::new(FailingSpi::always_failing()),
+            accel: Adxl355::new(FailingSpi::always_failing()),
+            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
+        };
+        let guard = PumpGuard::around(cfg.pump_centre_hz, 400.0);
+        let cal = LockinCalibration::UNITY;
+        let app = App::new(chips, &cfg, cal, cal, guard).unwrap();
+        let (lo, hi) = (guard.min_hz, guard.max_hz);
+        let mut probes = vec![
+            lo,
+            hi,
+            0.0,
+            -0.0,
+            -lo,
+            -hi,
+            1e-300,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            0.5 * (lo + hi),
+        ];
+        for e in [lo, hi] {
+            let b = e.to_bits();
+            probes.extend([f64::from_bits(b - 1), f64::from_bits(b + 1)]);
+        }
+        let mut hz = lo - 50.0;
+        while hz < hi + 50.0 {
+            probes.push(hz);
+            hz += 0.37;
+        }
+        for hz in probes {
+            assert_eq!(app.in_guard(hz), guard.contains(hz), "{hz}");
+        }
     }
 
     /// The tick path's integer guard plan picks the very word of `PumpGuard::plan`.

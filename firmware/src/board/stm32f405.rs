@@ -30,14 +30,13 @@
 //!
 //! [`App::tick`]: paragyro_firmware::app::App::tick
 
-use core::cell::RefCell;
-
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
 use defmt_rtt as _;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
-use embedded_hal_bus::spi::{ExclusiveDevice, RefCellDevice};
+use embedded_hal_bus::spi::{AtomicDevice, ExclusiveDevice};
+use embedded_hal_bus::util::AtomicCell;
 use paragyro_core::Config;
 use paragyro_core::config::PumpProfile;
 use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
@@ -69,7 +68,12 @@ struct CycleDelay;
 
 impl DelayNs for CycleDelay {
     fn delay_ns(&mut self, ns: u32) {
-        let cycles = (u64::from(ns) * u64::from(SYSCLK_HZ) / 1_000_000_000) as u32;
+        // floor(ns · 168 / 1000) in 32 bits (exact: the whole microseconds times 168 are
+        // an integer), no 64-bit division routine
+        const PER_US: u32 = SYSCLK_HZ / 1_000_000;
+        let cycles = (ns / 1_000)
+            .saturating_mul(PER_US)
+            .saturating_add((ns % 1_000) * PER_US / 1_000);
         cortex_m::asm::delay(cycles.max(1));
     }
 }
@@ -158,10 +162,11 @@ fn main() -> ! {
         10.MHz(),
         &mut rcc,
     );
-    let adc_bus = RefCell::new(spi1);
+    // the ADCs share SPI1: `AtomicDevice` answers a nested use with `Busy` (no panic path)
+    let adc_bus = AtomicCell::new(spi1);
     // GPIO writes are infallible on the STM32F4 (the error type is `Infallible`)
-    let Ok(adc_x_dev) = RefCellDevice::new_no_delay(&adc_bus, gpioa.pa4.into_push_pull_output());
-    let Ok(adc_y_dev) = RefCellDevice::new_no_delay(&adc_bus, gpioc.pc4.into_push_pull_output());
+    let Ok(adc_x_dev) = AtomicDevice::new_no_delay(&adc_bus, gpioa.pa4.into_push_pull_output());
+    let Ok(adc_y_dev) = AtomicDevice::new_no_delay(&adc_bus, gpioc.pc4.into_push_pull_output());
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
@@ -223,7 +228,8 @@ fn main() -> ! {
 
     let mut k: u32 = 0;
     let mut drdy_timeouts: u32 = 0;
-    let mut cycles_sum: u64 = 0;
+    // u32 (50 ticks of ≤ 2 ms are ≤ 16.8 M cycles): no 64-bit division in the image
+    let mut cycles_sum: u32 = 0;
     let mut cycles_max: u32 = 0;
     loop {
         // DRDY is active low; it returns high when the frame is read
@@ -237,7 +243,7 @@ fn main() -> ! {
         let c0 = DWT::cycle_count();
         let r = app.tick(&mut io);
         let dt = DWT::cycle_count().wrapping_sub(c0);
-        cycles_sum += u64::from(dt);
+        cycles_sum = cycles_sum.saturating_add(dt);
         cycles_max = cycles_max.max(dt);
         #[cfg(feature = "capture")]
         super::capture_tick(k, app);
@@ -245,8 +251,8 @@ fn main() -> ! {
         if k.is_multiple_of(super::TELEMETRY_EVERY) {
             super::telemetry(k, cfg.fs_hz, app, &r);
             defmt::info!(
-                "tick cycles: mean {=u64} max {=u32} (last {=u32} ticks), DRDY timeouts {=u32}",
-                cycles_sum / u64::from(super::TELEMETRY_EVERY),
+                "tick cycles: mean {=u32} max {=u32} (last {=u32} ticks), DRDY timeouts {=u32}",
+                cycles_sum / super::TELEMETRY_EVERY,
                 cycles_max,
                 super::TELEMETRY_EVERY,
                 drdy_timeouts

@@ -347,8 +347,10 @@ impl AmplitudeWord {
             .saturating_mul(mant)
             .checked_shr(shift)
             .unwrap_or(0);
-        // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)).
-        let asf = four_v.isqrt().saturating_add(1) / 2;
+        // round(√v) = (floor(2√v) + 1) / 2 and floor(2√v) = isqrt(floor(4v)); 4v ≤
+        // 4·1023² < 2^22 (s ≤ 1), so a 32-bit root does (`u64::isqrt` linked a 512 B table
+        // and the 64-bit division into the image)
+        let asf = isqrt_below_2_22(u32::try_from(four_v).unwrap_or(u32::MAX)).saturating_add(1) / 2;
         Self(u16::try_from(asf).map_or(ASF_MAX, |a| a.min(ASF_MAX)))
     }
 
@@ -368,6 +370,33 @@ impl AmplitudeWord {
         let [hi, lo] = self.0.to_be_bytes();
         [0x00, ACR_MULTIPLIER_ENABLE | (hi & 0x03), lo]
     }
+}
+
+/// `floor(√n)` for `n < 2^22` (no table, no integer division); larger `n` give 2047 (the
+/// callers clamp to [`ASF_MAX`] anyway). An `f32` estimate (`n` is exact in `f32`): half
+/// the exponent, three Newton steps (relative error < 1e-6, i.e. < 0.003 at √n < 2048),
+/// then the integer root corrected by one step either way; checked for every `n` by the
+/// test `isqrt_below_2_22_is_the_integer_square_root_everywhere`.
+fn isqrt_below_2_22(n: u32) -> u32 {
+    if n >= 1 << 22 {
+        return 2047;
+    }
+    if n == 0 {
+        return 0;
+    }
+    let x = n as f32;
+    let mut y = f32::from_bits((x.to_bits() >> 1).wrapping_add(0x1FC0_0000));
+    y = 0.5 * (y + x / y);
+    y = 0.5 * (y + x / y);
+    y = 0.5 * (y + x / y);
+    // saturating casts; √n < 2048, so the squares below cannot overflow
+    let mut r = y as u32;
+    if r.wrapping_mul(r) > n {
+        r = r.wrapping_sub(1);
+    } else if r.wrapping_add(1).wrapping_mul(r.wrapping_add(1)) <= n {
+        r = r.wrapping_add(1);
+    }
+    r
 }
 
 /// What the caller must do after buffered writes: pulse the `IO_UPDATE` GPIO once.
@@ -570,6 +599,15 @@ impl<SPI: SpiDevice> Ad9959<SPI> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn isqrt_below_2_22_is_the_integer_square_root_everywhere() {
+        for n in 0..(1u32 << 22) {
+            assert_eq!(isqrt_below_2_22(n), n.isqrt(), "n = {n}");
+        }
+        assert_eq!(isqrt_below_2_22(1 << 22), 2047);
+        assert_eq!(isqrt_below_2_22(u32::MAX), 2047);
+    }
 
     /// The former `f64` form of `from_scale` (the reference).
     fn from_scale_f64(s: f32) -> AmplitudeWord {

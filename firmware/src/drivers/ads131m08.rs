@@ -210,10 +210,16 @@ const CRC_TABLE: [u16; 256] = {
 /// over `data`, starting from `crc` (table driven).
 pub fn crc16_ccitt_update(mut crc: u16, data: &[u8]) -> u16 {
     for &byte in data {
-        let idx = usize::from(((crc >> 8) as u8) ^ byte);
-        crc = (crc << 8) ^ CRC_TABLE.get(idx).copied().unwrap_or(0);
+        crc = crc16_ccitt_byte(crc, byte);
     }
     crc
+}
+
+/// One byte of the table-driven CRC-16-CCITT.
+#[inline(always)]
+fn crc16_ccitt_byte(crc: u16, byte: u8) -> u16 {
+    let idx = usize::from(((crc >> 8) as u8) ^ byte);
+    (crc << 8) ^ CRC_TABLE.get(idx).copied().unwrap_or(0)
 }
 
 /// The bitwise CRC-16-CCITT, kept as the reference the table is checked against.
@@ -588,38 +594,51 @@ impl Frame {
             .fold(0u8, |m, (i, _)| m | 1u8.checked_shl(i as u32).unwrap_or(0))
     }
 
-    /// Any lock-in channel (0-6) at full scale.
+    /// Any lock-in channel (0-6) at full scale (= `saturated_mask() & 0x7F != 0`, written
+    /// out without branches).
     pub fn lockin_saturated(&self) -> bool {
-        self.saturated_mask() & 0x7F != 0
+        let [c0, c1, c2, c3, c4, c5, c6, _] = self.codes;
+        c0.is_saturated()
+            | c1.is_saturated()
+            | c2.is_saturated()
+            | c3.is_saturated()
+            | c4.is_saturated()
+            | c5.is_saturated()
+            | c6.is_saturated()
     }
 
     /// Decode 30 received bytes, checking the output CRC.
     pub fn decode(bytes: &[u8; FRAME_BYTES]) -> Result<Frame, CrcError> {
+        // the 27 CRC'd bytes through the table in order, a word (three bytes) per loop
+        // step; the codes straight from their bytes (no per-word match, no zeroed frame)
         let (words, _) = bytes.as_chunks::<WORD_BYTES>();
         let mut crc = CRC_SEED;
-        let mut frame = Frame::default();
-        let mut got = 0u16;
-        for (i, w) in words.iter().enumerate() {
-            let [a, b, _] = *w;
-            match i {
-                0 => frame.response = u16::from_be_bytes([a, b]),
-                FRAME_WORDS_MINUS_ONE => {
-                    got = u16::from_be_bytes([a, b]);
-                    continue;
-                }
-                _ => {
-                    if let Some(slot) = frame.codes.get_mut(i.wrapping_sub(1)) {
-                        *slot = RawCode::from_be_bytes(*w);
-                    }
-                }
-            }
-            crc = crc16_ccitt_update(crc, w);
+        for &[x, y, z] in words.iter().take(FRAME_WORDS_MINUS_ONE) {
+            crc = crc16_ccitt_byte(crc16_ccitt_byte(crc16_ccitt_byte(crc, x), y), z);
         }
-        if crc == got {
-            Ok(frame)
-        } else {
-            Err(CrcError { expected: crc, got })
+        #[rustfmt::skip]
+        let [
+            r0, r1, _, a0, a1, a2, b0, b1, b2, c0, c1, c2, d0, d1, d2, e0, e1, e2, f0, f1, f2,
+            g0, g1, g2, h0, h1, h2, k0, k1, _,
+        ] = *bytes;
+        let got = u16::from_be_bytes([k0, k1]);
+        if crc != got {
+            return Err(CrcError { expected: crc, got });
         }
+        let code = RawCode::from_be_bytes;
+        Ok(Frame {
+            response: u16::from_be_bytes([r0, r1]),
+            codes: [
+                code([a0, a1, a2]),
+                code([b0, b1, b2]),
+                code([c0, c1, c2]),
+                code([d0, d1, d2]),
+                code([e0, e1, e2]),
+                code([f0, f1, f2]),
+                code([g0, g1, g2]),
+                code([h0, h1, h2]),
+            ],
+        })
     }
 
     /// Encode as the device would send it, with a valid CRC (tests, simulation).
@@ -766,6 +785,26 @@ impl LockinCalibration {
             re_um: [a1r, a2r, a3r],
             im_um: [a1i, a2i, a3i],
         }
+    }
+
+    /// The lock-in channels of a frame in µm, in code order (`x0, re1, im1, re2, im2, re3,
+    /// im3`), written out: the same values as [`LockinCalibration::to_um`] without the
+    /// loop and the intermediate copies (the tick path).
+    #[inline]
+    pub fn channels_um(&self, frame: &Frame) -> [f32; LOCKIN_CHANNELS] {
+        let [c0, c1, c2, c3, c4, c5, c6, _] = frame.codes;
+        let [s0, s1, s2, s3, s4, s5, s6] = self.um_per_code;
+        let [o0, o1, o2, o3, o4, o5, o6] = self.offset_code;
+        let f = |c: RawCode, o: i32, s: f32| c.get().saturating_sub(o) as f32 * s;
+        [
+            f(c0, o0, s0),
+            f(c1, o1, s1),
+            f(c2, o2, s2),
+            f(c3, o3, s3),
+            f(c4, o4, s4),
+            f(c5, o5, s5),
+            f(c6, o6, s6),
+        ]
     }
 
     /// Convert the lock-in channels of a frame to µm.
@@ -930,6 +969,96 @@ impl<SPI: SpiDevice> Ads131m08<SPI> {
 
 #[cfg(test)]
 mod tests {
+    /// The former loop form of [`Frame::decode`] (the reference of its test).
+    fn decode_loop(bytes: &[u8; FRAME_BYTES]) -> Result<Frame, CrcError> {
+        use super::*;
+
+        let (words, _) = bytes.as_chunks::<WORD_BYTES>();
+        let mut crc = CRC_SEED;
+        let mut frame = Frame::default();
+        let mut got = 0u16;
+        for (i, w) in words.iter().enumerate() {
+            let [a, b, _] = *w;
+            match i {
+                0 => frame.response = u16::from_be_bytes([a, b]),
+                FRAME_WORDS_MINUS_ONE => {
+                    got = u16::from_be_bytes([a, b]);
+                    continue;
+                }
+                _ => {
+                    if let Some(slot) = frame.codes.get_mut(i.wrapping_sub(1)) {
+                        *slot = RawCode::from_be_bytes(*w);
+                    }
+                }
+            }
+            crc = crc16_ccitt_update(crc, w);
+        }
+        if crc == got {
+            Ok(frame)
+        } else {
+            Err(CrcError { expected: crc, got })
+        }
+    }
+
+    #[test]
+    fn channels_um_and_lockin_saturated_equal_their_loop_forms() {
+        use super::*;
+        let cal = LockinCalibration {
+            um_per_code: [0.5, -1.25, 3.0e-3, 7.0, 1.0, 2.5e-6, -0.75],
+            offset_code: [0, 100, -100, i32::MAX, i32::MIN, 12345, -7],
+        };
+        let mut x = 0x2545_F491u32;
+        for n in 0..20_000u32 {
+            let mut codes = [RawCode::default(); CHANNELS];
+            for c in codes.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                *c = match x % 7 {
+                    0 => RawCode::POSITIVE_FULL_SCALE,
+                    1 if n % 3 == 0 => RawCode::NEGATIVE_FULL_SCALE,
+                    _ => RawCode::from_u24(x >> 8),
+                };
+            }
+            let f = Frame { response: 0, codes };
+            let u = cal.frame_to_um(&f);
+            let [r1, r2, r3] = u.re_um;
+            let [i1, i2, i3] = u.im_um;
+            let want = [u.x0_um, r1, i1, r2, i2, r3, i3];
+            let got = cal.channels_um(&f);
+            assert!(
+                want.iter()
+                    .zip(got.iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            assert_eq!(f.lockin_saturated(), f.saturated_mask() & 0x7F != 0);
+        }
+    }
+
+    #[test]
+    fn written_out_decode_equals_the_loop() {
+        use super::{FRAME_BYTES, Frame};
+        let mut x = 0x9E37_79B9u32;
+        for n in 0..20_000u32 {
+            let mut f = [0u8; FRAME_BYTES];
+            for b in f.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                *b = x as u8;
+            }
+            // half of them with a valid CRC (then one bit flipped in some)
+            if n % 2 == 0 {
+                let crc = super::crc16_ccitt(&f[..27]).to_be_bytes();
+                f[27] = crc[0];
+                f[28] = crc[1];
+                if n % 6 == 0 {
+                    f[(x % 29) as usize] ^= 1 << (x % 8);
+                }
+            }
+            assert_eq!(Frame::decode(&f), decode_loop(&f));
+        }
+    }
     #[test]
     fn null_frame_constant_is_the_null_command_frame() {
         assert_eq!(
