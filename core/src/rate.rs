@@ -305,8 +305,16 @@ impl<T: Real> RateState<T> {
             th2n[3].to_bits(),
             th2n[4].to_bits(),
         ];
-        if self.nom.stamp == Some(key) {
-            return;
+        // word-wise, no early exit: `==` on the arrays became a byte-wise memcmp,
+        // ≈ 350 instructions per tick on the chip (firmware/scripts/fil-profile.sh)
+        if let Some(stamp) = self.nom.stamp {
+            let diff = stamp
+                .iter()
+                .zip(key.iter())
+                .fold(0u64, |acc, (a, b)| acc | (a ^ b));
+            if diff == 0 {
+                return;
+            }
         }
         self.nom = NominalSlow {
             th21: T::from_f64(th2n[0]),

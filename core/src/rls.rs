@@ -581,10 +581,12 @@ impl<T: Real, const N: usize> Rls<T, N> {
         } else {
             self.settings.p0
         };
-        for (i, row) in self.u.iter_mut().enumerate() {
-            for (j, uij) in row.iter_mut().enumerate() {
-                *uij = if i == j { T::ONE } else { T::ZERO };
-            }
+        // zeroed as a block (a word-wise memclr), then the unit diagonal: the branchy
+        // per-element loop was ≈ 1 100 instructions on the chip's reset tick (the loop's
+        // costliest tick, `firmware/scripts/fil-profile.sh drift-retune 1157`)
+        self.u = [[T::ZERO; N]; N];
+        for i in 0..N {
+            self.u[i][i] = T::ONE;
         }
         self.d = [p; N];
         self.last_trace = p * T::from_f64(N as f64);

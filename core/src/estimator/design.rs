@@ -139,6 +139,9 @@ pub(crate) struct Fit<T> {
     /// The covariance-bounded limits `p0·n·1.0001` (n = 8, 6).
     pub lim1: T,
     pub lim2: T,
+    /// The start-up trace bounds `p0·n·10` (n = 8, 6), lifted to again after a reset.
+    pub trace_max1: T,
+    pub trace_max2: T,
     /// Re-linearise every this many samples (0: never).
     pub relin_every: u64,
     /// The change detector of both axes.
@@ -163,6 +166,8 @@ impl<T: Real> Fit<T> {
             p_reset: T::from_f64(cfg.rls.p_reset),
             lim1: T::from_f64(cfg.rls.p0 * 8.0 * 1.0001),
             lim2: T::from_f64(cfg.rls.p0 * 6.0 * 1.0001),
+            trace_max1: T::from_f64(cfg.rls.p0 * 8.0 * 10.0),
+            trace_max2: T::from_f64(cfg.rls.p0 * 6.0 * 10.0),
             relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
             change: ChangeDesign::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
         }

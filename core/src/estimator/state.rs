@@ -323,9 +323,9 @@ impl<T: Real> State<T> {
     /// After a covariance reset the converged trace of the old regime means nothing:
     /// the bound is lifted to its start-up value and learned again at the next settle.
     pub fn lift_trace_bound(&mut self, d: &Design<T>) {
-        let p0 = d.cfg.rls.p0;
-        self.rls1.set_trace_max(T::from_f64(p0 * 8.0 * 10.0));
-        self.rls2.set_trace_max(T::from_f64(p0 * 6.0 * 10.0));
+        // in T from the design (no soft-f64 on the reset tick)
+        self.rls1.set_trace_max(d.fit.trace_max1);
+        self.rls2.set_trace_max(d.fit.trace_max2);
         self.bound_learned = false;
     }
 }
