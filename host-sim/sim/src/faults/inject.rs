@@ -185,10 +185,14 @@ impl Injector {
         let wy2 = est.wy2();
         let rate = est.rate_dps();
         let (t1, t2) = est.theta();
+        // the fast rate channel's outputs too (the product's rate, `StepOutput::rate`)
         let finite = out.pump_hz_next.is_finite()
             && out.pump_scale_next.is_finite()
             && wy2.is_finite()
             && rate.is_finite()
+            && out.rate.rate_dps.is_finite()
+            && out.rate.rate_slow_dps.is_finite()
+            && out.rate.quadrature_dps.is_finite()
             && t1.iter().chain(t2.iter()).all(|v| v.is_finite());
         if !finite {
             self.non_finite_outputs += 1;
