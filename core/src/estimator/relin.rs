@@ -8,14 +8,14 @@
 //! | tick  | part                                                              |
 //! |-------|-------------------------------------------------------------------|
 //! | k     | trigger (same test as before), capture x₁, x₂                     |
-//! | k + 1 | θ̂1 = θ1n + sc1·x₁ (the captured x₁; `f64`)                       |
-//! | k + 2 | θ̂2 = θ2n + sc2·x₂                                                |
-//! | k + 3 | the row constants of the new point ([`NominalConsts::new`])       |
-//! | k + 4 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
+//! | k + 1 | θ̂1 = θ1n + sc1·x₁, θ̂2 = θ2n + sc2·x₂ (the captured x; `f64`)     |
+//! | k + 2 | the row constants of the new point ([`NominalConsts::new`])       |
+//! | k + 3 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
 //!
-//! (The trigger tick only copies: its `f64` sums, ≈ 1 000 instructions of soft-float, fell
-//! on the loop's costliest tick, a covariance reset, `firmware/scripts/fil-profile.sh
-//! drift-retune 1157`.)
+//! (The trigger tick only copies x: its `f64` sums, ≈ 1 000 instructions of soft-float,
+//! had fallen on the loop's costliest tick, a covariance reset, `firmware/scripts/
+//! fil-profile.sh drift-retune 1157`; on tick k + 1 they cost the same and give the same
+//! numbers.)
 //!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
@@ -23,10 +23,10 @@
 //! between use the old point, as they would have before the trigger.
 //!
 //! The rate channel's hand-over (a new rate at the end of a rate transient, θ24 + Δ,
-//! θ14 − Δ, [`crate::rate`]) goes through the same five parts: requested with
+//! θ14 − Δ, [`crate::rate`]) goes through the same four parts: requested with
 //! [`Relin::request_handover`], it starts at the next tick (a periodic one in progress
 //! is dropped: nothing of it was swapped yet), adds Δ to the captured point, and swaps
-//! on the fifth tick if that sample is good. The slow RLS stays gated from the request
+//! on the fourth tick if that sample is good. The slow RLS stays gated from the request
 //! to the swap ([`Relin::handover_pending`]), so x does not move meanwhile and θ̂ takes
 //! exactly the new rate; its cost is spread like the periodic one.
 
@@ -38,7 +38,7 @@ use crate::rows::NominalConsts;
 /// The re-linearisation in progress (`Default`: none).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Relin<T> {
-    /// 0 idle, else the next part to do (1: θ̂1, 2: θ̂2, 3: constants, 4: swap).
+    /// 0 idle, else the next part to do (1: θ̂1 and θ̂2, 2: constants, 3: swap).
     phase: u8,
     /// A hand-over of the rate is requested (Δθ24 = `want_delta`), not yet started.
     want: bool,
@@ -111,31 +111,25 @@ impl<T: Real> State<T> {
                 for j in 0..8 {
                     p.t1[j] = self.lin.th1n[j] + (f.sc1[j] * p.x1[j]).to_f64();
                 }
-                if p.handover {
-                    p.t1[3] -= p.delta;
-                }
-                p.phase = 2;
-            }
-            2 => {
-                let p = &mut self.lin.pending;
                 for j in 0..6 {
                     p.t2[j] = self.lin.th2n[j] + (f.sc2[j] * p.x2[j]).to_f64();
                 }
                 if p.handover {
+                    p.t1[3] -= p.delta;
                     p.t2[3] += p.delta;
                 }
                 // a non-finite point is dropped (as the one-tick version drops it)
                 let finite = p.t1.iter().chain(p.t2.iter()).all(|v| v.is_finite());
-                p.phase = if finite { 3 } else { 0 };
+                p.phase = if finite { 2 } else { 0 };
                 p.handover &= finite;
             }
-            3 => {
+            2 => {
                 let p = &mut self.lin.pending;
                 p.nom = NominalConsts::new(&p.t1, &p.t2, d.units.om_ref);
                 p.t14 = T::from_f64(p.t1[3]);
                 p.t22 = T::from_f64(p.t2[1]);
                 p.t24 = T::from_f64(p.t2[3]);
-                p.phase = 4;
+                p.phase = 3;
             }
             // the swap waits for an updated tick: a flagged (held) sample must leave θ̂
             // exactly as it was, and the swap moves it by rounding (a hand-over, gated,
@@ -172,11 +166,11 @@ mod tests {
     extern crate std;
     use crate::config::Config;
 
-    /// The five parts in order: nothing moves until the swap; at the swap θ_nom becomes
+    /// The four parts in order: nothing moves until the swap; at the swap θ_nom becomes
     /// the trigger tick's estimate, the RLS keeps what it learnt since, and θ̂ = θ_nom +
     /// sc·x is the same before and after (f64: to rounding).
     #[test]
-    fn spread_relinearisation_keeps_theta_and_swaps_on_the_fifth_tick() {
+    fn spread_relinearisation_keeps_theta_and_swaps_on_the_fourth_tick() {
         let mut est = Config::table2().build::<f64>().unwrap();
         let (d, s) = (&est.design, &mut est.state);
         let every = d.fit.relin_every;
@@ -196,17 +190,16 @@ mod tests {
         let mut x1b = x1;
         x1b[3] += 0.005;
         assert!(s.rls1.set_estimate(x1b));
-        for i in 1..=3 {
-            s.relin_tick(d, k + i, true, true);
-        }
-        assert_eq!(s.lin.pending.phase, 4);
+        s.relin_tick(d, k + 1, true, true);
+        s.relin_tick(d, k + 2, true, true);
+        assert_eq!(s.lin.pending.phase, 3);
         assert_eq!(s.lin.relins, 0);
         let (b1, b2) = s.theta(d);
         // a held (not updated) tick leaves the swap pending and θ̂ bit for bit
-        s.relin_tick(d, k + 4, false, true);
-        assert_eq!((s.lin.pending.phase, s.lin.relins), (4, 0));
+        s.relin_tick(d, k + 3, false, true);
+        assert_eq!((s.lin.pending.phase, s.lin.relins), (3, 0));
         assert_eq!(s.theta(d), (b1, b2));
-        s.relin_tick(d, k + 4, true, true);
+        s.relin_tick(d, k + 3, true, true);
         assert_eq!((s.lin.pending.phase, s.lin.relins), (0, 1));
         let (a1, a2) = s.theta(d);
         for (b, a) in b1.iter().chain(b2.iter()).zip(a1.iter().chain(a2.iter())) {
@@ -220,11 +213,11 @@ mod tests {
         assert!(s.rls2.estimate().iter().all(|v| v.abs() < 1e-15));
     }
 
-    /// The rate hand-over through the same parts: requested during a periodic
+    /// The rate hand-over through the same four parts: requested during a periodic
     /// re-linearisation it drops that one, keeps the RLS gated until the swap, swaps on a
     /// good (not updated: gated) sample and moves θ24 by +Δ, θ14 by −Δ, the rest kept.
     #[test]
-    fn rate_handover_moves_theta24_and_theta14_at_its_swap() {
+    fn rate_handover_moves_theta24_and_theta14_on_the_fourth_tick() {
         let mut est = Config::table2().build::<f64>().unwrap();
         let (d, s) = (&est.design, &mut est.state);
         let x1: [f64; 8] = core::array::from_fn(|j| 0.01 * (j as f64 + 1.0));
@@ -238,15 +231,15 @@ mod tests {
         s.lin.pending.request_handover(delta);
         assert!(s.lin.pending.handover_pending());
         assert_eq!(s.lin.pending.phase, 0, "the periodic one is dropped");
-        for i in 1..=4 {
+        for i in 1..=3 {
             s.relin_tick(d, k + i, false, true);
             assert!(s.lin.pending.handover_pending());
         }
         // a flagged sample holds the swap
-        s.relin_tick(d, k + 5, false, false);
+        s.relin_tick(d, k + 4, false, false);
         assert!(s.lin.pending.handover_pending());
         assert_eq!(s.lin.relins, 0);
-        s.relin_tick(d, k + 6, false, true);
+        s.relin_tick(d, k + 5, false, true);
         assert!(!s.lin.pending.handover_pending());
         assert_eq!(s.lin.relins, 1);
         let (a1, a2) = s.theta(d);

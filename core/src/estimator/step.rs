@@ -188,7 +188,7 @@ impl<T: Real> State<T> {
             &th,
             (self.k, slow_ok),
         );
-        // the new point: θ24 + Δ, θ14 − Δ (a new rate, μxy unchanged), spread over five
+        // the new point: θ24 + Δ, θ14 − Δ (a new rate, μxy unchanged), spread over four
         // ticks like a re-linearisation (relin.rs), the slow RLS gated until the swap
         if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
             self.lin.pending.request_handover(delta.to_f64());
@@ -272,7 +272,7 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate, and a requested rate hand-over happens, spread over five
+    /// a moderate estimate, and a requested rate hand-over happens, spread over four
     /// ticks (`relin.rs`).
     #[inline(always)]
     fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool, good: bool) {
