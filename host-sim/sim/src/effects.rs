@@ -386,6 +386,8 @@ pub struct Effects {
     pub quadratic: f64,
     /// Out of library: sense pick-off gain error g.
     pub readout_gain: f64,
+    /// An external term the simulator does not know ([`crate::plant::hook`]; `None`: none).
+    pub hook: Option<crate::plant::hook::PlantHook>,
 }
 
 impl Effects {
@@ -414,6 +416,7 @@ impl Effects {
             || self.force_leak != 0.0
             || self.quadratic != 0.0
             || self.readout_gain != 0.0
+            || self.hook.is_some()
     }
 
     /// Whether nothing is added at all.
