@@ -24,6 +24,9 @@
 //! |---|---|---|
 //! | `quadratic_stiffness` | q (–) | drive −q X², sense −q Y² |
 //! | `readout_gain` | g (–) | the sense pick-off reads (1 + g)·Y |
+//!
+//! Effects no name here describes (the blind benchmark's out-of-library ones) come in
+//! through the plant's external-term hook, [`Effects::hook`] ([`crate::plant::hook`]).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

@@ -13,6 +13,8 @@
 //! paper's eq. (25). The right-hand side lives in one function, `rhs`; new physical
 //! effects are added there as switchable terms without touching the integrator. The
 //! measurement (`Xm = X + n_x`, `Ym = Y + n_y`) lives in one function, `measure`.
+//! A term the simulator does not know comes in through [`hook`] (a force, two states of
+//! its own and a pick-off offset, carried by [`Effects::hook`]).
 //!
 //! # Time grid
 //!
@@ -730,7 +732,8 @@ impl GyroSim {
                     gvd,
                 };
                 if HOOK && let Some(hk) = &hook {
-                    (z, hw) = hook::rk4_step_hooked(&th, &z, &hw, h, [&da, &dh, &de], tau, &fx, hk);
+                    (z, hw) =
+                        hook::rk4_step_hooked(&th, (&z, &hw), h, [&da, &dh, &de], tau, &fx, hk);
                     tau += h;
                 } else {
                     z = rk4_step_g::<FX>(&th, &z, h, &da, &dh, &de, &fx);

@@ -107,8 +107,7 @@ impl PartialEq for PlantHook {
 #[inline(always)]
 pub(super) fn rk4_step_hooked(
     th: &super::Theta,
-    z: &[f64; 4],
-    w: &[f64; HOOK_STATES],
+    (z, w): (&[f64; 4], &[f64; HOOK_STATES]),
     h: f64,
     ds: [&super::Drive; 3],
     tau: f64,
