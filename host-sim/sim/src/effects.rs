@@ -24,6 +24,9 @@
 //! |---|---|---|
 //! | `quadratic_stiffness` | q (–) | drive −q X², sense −q Y² |
 //! | `readout_gain` | g (–) | the sense pick-off reads (1 + g)·Y |
+//!
+//! Effects no name here describes (the blind benchmark's out-of-library ones) come in
+//! through the plant's external-term hook, [`Effects::hook`] ([`crate::plant::hook`]).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -386,6 +389,8 @@ pub struct Effects {
     pub quadratic: f64,
     /// Out of library: sense pick-off gain error g.
     pub readout_gain: f64,
+    /// An external term the simulator does not know ([`crate::plant::hook`]; `None`: none).
+    pub hook: Option<crate::plant::hook::PlantHook>,
 }
 
 impl Effects {
@@ -414,6 +419,7 @@ impl Effects {
             || self.force_leak != 0.0
             || self.quadratic != 0.0
             || self.readout_gain != 0.0
+            || self.hook.is_some()
     }
 
     /// Whether nothing is added at all.

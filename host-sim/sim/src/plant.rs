@@ -13,6 +13,8 @@
 //! paper's eq. (25). The right-hand side lives in one function, `rhs`; new physical
 //! effects are added there as switchable terms without touching the integrator. The
 //! measurement (`Xm = X + n_x`, `Ym = Y + n_y`) lives in one function, `measure`.
+//! A term the simulator does not know comes in through [`hook`] (a force, two states of
+//! its own and a pick-off offset, carried by [`Effects::hook`]).
 //!
 //! # Time grid
 //!
@@ -44,11 +46,14 @@
 
 use crate::effects::{ES_C3, Effects};
 use crate::lockin::{BlockLpf, LockinExt, LockinOut, mixer_products};
+use hook::HOOK_STATES;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
+
+pub mod hook;
 
 /// Table 2 Coriolis coefficient γ (150 °/s), the core's `TABLE2.gamma`.
 pub const GAMMA_TABLE2: f64 = paragyro_core::physics::TABLE2.gamma;
@@ -238,6 +243,8 @@ pub struct GyroSim {
     vib_omega: f64,
     /// Angular vibration phase Ω_v·τ at the current time, wrapped.
     vib_phase: f64,
+    /// The external term's own states ([`hook`]; 0 without one).
+    w: [f64; HOOK_STATES],
 }
 
 /// Pump and reference quantities at one instant, as seen by `rhs` and `measure`.
@@ -524,6 +531,7 @@ impl GyroSim {
             fx: Effects::default(),
             vib_omega: 0.0,
             vib_phase: 0.0,
+            w: [0.0; HOOK_STATES],
         };
         // first lock-in sample at τ = 0 (ψ = 0); s is irrelevant to the measurement here
         let d0 = Drive {
@@ -554,19 +562,26 @@ impl GyroSim {
     pub fn advance(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
         let noise = self.noise.sigma > 0.0;
         let chirp = u1.omega != u0.omega;
-        if self.fx.plant_active() {
+        if self.fx.hook.is_some() {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, true>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, true>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, true>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, true>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, true, true>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, true, true>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, true, true>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, true, true>(theta, u0, u1),
+            }
+        } else if self.fx.plant_active() {
+            match (noise, chirp) {
+                (true, true) => self.run_interval::<true, true, true, false>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, true, false>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, true, false>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, true, false>(theta, u0, u1),
             }
         } else {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, false>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, false>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, false>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, false>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, false, false>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, false, false>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, false, false>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, false, false>(theta, u0, u1),
             }
         }
         if self.vib_omega != 0.0 {
@@ -597,8 +612,9 @@ impl GyroSim {
     }
 
     /// The hot loop: `M/m` lock-in blocks of `m` RK4 steps each (`m` = 32 by default).
+    /// `HOOK`: with the external term of `fx.hook` (its force, states and pick-off offset).
     #[inline(always)]
-    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: bool>(
+    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: bool, const HOOK: bool>(
         &mut self,
         theta: &Theta,
         u0: &PlantInputs,
@@ -633,8 +649,30 @@ impl GyroSim {
         let (gv_amp, vo) = (fx.vib_gamma, self.vib_omega);
         let wv = vo * delta;
         let vib_phase = self.vib_phase;
-        let meas = |z: &[f64; 4], n: [f64; 2], rc: f64, rs: f64, d: &Drive| {
-            if FX {
+        let hook = fx.hook;
+        let mut hw = self.w;
+        let tau_k = self.time_tau();
+        // the external term's clock: τ at the start of the current RK4 step
+        let mut tau = 0.0;
+        let meas = |z: &[f64; 4],
+                    w: &[f64; HOOK_STATES],
+                    tau: f64,
+                    n: [f64; 2],
+                    rc: f64,
+                    rs: f64,
+                    d: &Drive| {
+            if HOOK && let Some(hk) = &hook {
+                let m = measure_fx(z, n, d, &fx);
+                let o = hk.offset(&hook::HookAt {
+                    tau,
+                    z: *z,
+                    w: *w,
+                    cos2psi: d.cos2psi,
+                    s: d.s,
+                    accel: [d.ax, d.ay],
+                });
+                [m[0] + o[0], m[1] + o[1]]
+            } else if FX {
                 measure_fx(z, n, d, &fx)
             } else {
                 measure(z, n, rc, rs, d)
@@ -656,10 +694,13 @@ impl GyroSim {
                 gv,
                 gvd,
             };
+            if HOOK {
+                tau = tau_k + jf * delta;
+            }
             for i in 0..blk {
                 if i > 0 {
                     let n = self.noise.draw::<NOISE>();
-                    let [xm, ym] = meas(&z, n, rc, rs, &da);
+                    let [xm, ym] = meas(&z, &hw, tau, n, rc, rs, &da);
                     self.lpf.push(&mixer_products(xm, ym, rc, rs));
                 }
                 let (hc, hs) = ch.step::<CHIRP>();
@@ -690,15 +731,22 @@ impl GyroSim {
                     gv,
                     gvd,
                 };
-                z = rk4_step_g::<FX>(&th, &z, h, &da, &dh, &de, &fx);
+                if HOOK && let Some(hk) = &hook {
+                    (z, hw) =
+                        hook::rk4_step_hooked(&th, (&z, &hw), h, [&da, &dh, &de], tau, &fx, hk);
+                    tau += h;
+                } else {
+                    z = rk4_step_g::<FX>(&th, &z, h, &da, &dh, &de, &fx);
+                }
                 da = de;
             }
             // block junction sample (also the first sample of the next block)
             let n = self.noise.draw::<NOISE>();
-            let [xm, ym] = meas(&z, n, rc, rs, &da);
+            let [xm, ym] = meas(&z, &hw, tau, n, rc, rs, &da);
             self.lpf.finish_block(&mixer_products(xm, ym, rc, rs));
         }
         self.z = z;
+        self.w = hw;
         self.psi = next_psi(psi_k, self.ts, u0.omega, u1.omega);
         self.k += 1;
     }
@@ -711,6 +759,11 @@ impl GyroSim {
     /// The plant state `[X, X', Y, Y']` at the current time.
     pub fn state(&self) -> [f64; 4] {
         self.z
+    }
+
+    /// The external term's own states ([`hook`]) at the current time.
+    pub fn hook_states(&self) -> [f64; HOOK_STATES] {
+        self.w
     }
 
     /// The lock-in reference phase ψ (half the pump phase) at the current time, wrapped

@@ -42,7 +42,8 @@ pub use replay::{
 pub use simulate::{
     DEFAULT_TEMP_PROFILE, EffectSpec, RecordFiles, RecordOptions, RecordTruth, SIM_PUMP_AMP_REF_V,
     TruthClosedLoop, TruthEvent, TruthLockin, TruthPlant, TruthWhat, TruthXy, simulate_record,
-    simulate_record_with, truth_path, write_simulated_record,
+    simulate_record_ext, simulate_record_with, truth_path, write_simulated_record,
+    write_simulated_record_ext,
 };
 pub use write::{push_number, write_record, write_record_to};
 

@@ -31,11 +31,13 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
 pub mod device;
+pub mod outside;
 #[cfg(test)]
 mod tests;
 
 use crate::diagnose::{self, Answer, Model, Options, Report, to_json_sorted};
 use device::DeviceDraw;
+use outside::{Outside, OutsideSpec};
 use paragyro_simulator::effects::{Effect, EffectSpec, LIBRARY};
 use paragyro_simulator::par;
 use paragyro_simulator::record::{self, RecordOptions};
@@ -56,7 +58,7 @@ pub struct SizeRange {
     pub signed: bool,
 }
 
-const fn r(low: f64, high: f64, limit: f64, signed: bool) -> SizeRange {
+pub(crate) const fn r(low: f64, high: f64, limit: f64, signed: bool) -> SizeRange {
     SizeRange {
         low,
         high,
@@ -122,6 +124,9 @@ pub struct Draw {
     pub temp_rise_k: f64,
     /// The device: Table 2 off by its tolerances, its rate, accelerations and noise.
     pub device: DeviceDraw,
+    /// The out-of-library effect ([`outside`], added through the plant hook), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outside: Option<OutsideSpec>,
 }
 
 /// labels.json.
@@ -131,6 +136,16 @@ pub struct Labels {
     pub seed: u64,
     /// The records' labels.
     pub records: Vec<Draw>,
+}
+
+/// A log-uniform magnitude in `r`, with a random sign when `r.signed`.
+fn draw_size(rng: &mut Xoshiro256PlusPlus, r: SizeRange) -> f64 {
+    let size = (r.low.ln() + rng.random::<f64>() * (r.high.ln() - r.low.ln())).exp();
+    if r.signed && rng.random::<bool>() {
+        -size
+    } else {
+        size
+    }
 }
 
 fn draw_effect(rng: &mut Xoshiro256PlusPlus, e: Effect) -> EffectSpec {
@@ -157,9 +172,10 @@ fn draw_effect(rng: &mut Xoshiro256PlusPlus, e: Effect) -> EffectSpec {
     }
 }
 
-/// The out-of-library effects drawn: the quadratic stiffness (the pick-off gain error
-/// rescales θ, so the calibration absorbs it: not an honest test of `unknown`).
-const OUTSIDE: [Effect; 1] = [Effect::QuadraticStiffness];
+/// The shares of the draw (cumulative): clean, one library effect, two, out of library.
+/// Run 4 (issue 11): 20 % clean, 45 % one, 10 % two, 25 % out of library (the module
+/// [`outside`], through the plant hook; run 3 drew 15 % of the quadratic stiffness).
+pub const SHARES: [f64; 3] = [0.20, 0.65, 0.75];
 
 /// Draws the N records' labels from `seed`.
 pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
@@ -169,12 +185,13 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
             let u: f64 = rng.random();
             let pick_lib =
                 |rng: &mut Xoshiro256PlusPlus| LIBRARY[rng.random_range(0..LIBRARY.len())];
-            let (category, effects) = if u < 0.2 {
+            let mut outside = None;
+            let (category, effects) = if u < SHARES[0] {
                 (Category::None, Vec::new())
-            } else if u < 0.7 {
+            } else if u < SHARES[1] {
                 let e = pick_lib(&mut rng);
                 (Category::Single, vec![draw_effect(&mut rng, e)])
-            } else if u < 0.85 {
+            } else if u < SHARES[2] {
                 let a = pick_lib(&mut rng);
                 let mut b = pick_lib(&mut rng);
                 while b == a {
@@ -185,8 +202,12 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
                     vec![draw_effect(&mut rng, a), draw_effect(&mut rng, b)],
                 )
             } else {
-                let e = OUTSIDE[rng.random_range(0..OUTSIDE.len())];
-                (Category::Outside, vec![draw_effect(&mut rng, e)])
+                let kind = Outside::ALL[rng.random_range(0..Outside::ALL.len())];
+                outside = Some(OutsideSpec {
+                    kind,
+                    size: draw_size(&mut rng, kind.size_range()),
+                });
+                (Category::Outside, Vec::new())
             };
             Draw {
                 id: format!("rec-{i:03}"),
@@ -195,9 +216,33 @@ pub fn draw(n: usize, seed: u64) -> Vec<Draw> {
                 seed: rng.random::<u32>() as u64,
                 temp_rise_k: ((2.0 + 6.0 * rng.random::<f64>()) * 100.0).round() / 100.0,
                 device: DeviceDraw::draw(&mut rng),
+                outside,
             }
         })
         .collect()
+}
+
+impl Draw {
+    /// The plant hook of its out-of-library effect, on its device.
+    pub fn hook(&self, sc: &Scenario) -> Option<paragyro_simulator::plant::hook::PlantHook> {
+        self.outside.map(|o| {
+            o.kind
+                .hook(o.size, self.device.physical(sc).wy2, sc.omega0_rad_s())
+        })
+    }
+
+    /// The largest |size| / detection limit of its effects.
+    pub fn size_over_limit(&self) -> f64 {
+        let lib = self
+            .effects
+            .iter()
+            .map(|e| e.size.abs() / size_range(e.effect).limit);
+        let out = self
+            .outside
+            .iter()
+            .map(|o| o.size.abs() / o.kind.size_range().limit);
+        lib.chain(out).fold(0.0f64, f64::max)
+    }
 }
 
 /// One scored record (score.json's `records`).
@@ -209,6 +254,9 @@ pub struct Scored {
     pub category: Category,
     /// The true effects.
     pub truth: Vec<Effect>,
+    /// The out-of-library effect, if any (its size is in `sizes`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outside: Option<Outside>,
     /// Their sizes.
     pub sizes: Vec<f64>,
     /// The diagnosis's answer.
@@ -264,7 +312,8 @@ pub fn run(
                 rate_table: true,
                 temp: Some((25.0, d.temp_rise_k)),
             };
-            record::write_simulated_record(&d.device.apply(&sc), p, &opts, &mut |_| {})
+            let dev = d.device.apply(&sc);
+            record::write_simulated_record_ext(&dev, p, &opts, d.hook(&sc), &mut |_| {})
                 .with_context(|| format!("recording {}", d.id))
                 .map(|_| ())
         },
@@ -378,11 +427,7 @@ fn score(d: &Draw, path: &Path, r: &Report, sc: &Scenario) -> anyhow::Result<Sco
     let verdict = r.verdict.answer();
     let truth: Vec<Effect> = d.effects.iter().map(|e| e.effect).collect();
     let correct = correct_for(d.category, &truth, verdict);
-    let ratio = d
-        .effects
-        .iter()
-        .map(|e| e.size.abs() / size_range(e.effect).limit)
-        .fold(0.0f64, f64::max);
+    let ratio = d.size_over_limit();
     // the oracle: the simulator with the true effects at their true sizes, same span
     let oracle_closure = match d.category {
         Category::Single | Category::Double => {
@@ -402,7 +447,13 @@ fn score(d: &Draw, path: &Path, r: &Report, sc: &Scenario) -> anyhow::Result<Sco
     Ok(Scored {
         id: d.id.clone(),
         category: d.category,
-        sizes: d.effects.iter().map(|e| e.size).collect(),
+        sizes: d
+            .effects
+            .iter()
+            .map(|e| e.size)
+            .chain(d.outside.map(|o| o.size))
+            .collect(),
+        outside: d.outside.map(|o| o.kind),
         verdict,
         secondary: r.verdict.secondary().map(|s| s.effect),
         correct,
@@ -531,6 +582,13 @@ pub struct Summary {
     pub unknown_on_outside: Option<f64>,
     pub unknown_on_outside_above_limit: Option<f64>,
     pub outside_above_limit_records: usize,
+    /// `unknown` on out-of-library records whose type lies outside the diagnosis's span
+    /// ([`Outside::outside_span`]): all of them, and those above their detection limit
+    /// (the gated share).
+    pub unknown_on_outside_span: Option<f64>,
+    pub outside_span_records: usize,
+    pub unknown_on_outside_span_above_limit: Option<f64>,
+    pub outside_span_above_limit_records: usize,
     /// Top-1 on single library effects, all sizes.
     pub top1_single_all_sizes: Option<f64>,
     /// A library effect named on an out-of-library record.
@@ -554,7 +612,20 @@ pub struct Summary {
     pub detection_vs_size: Vec<DetectionBin>,
     pub median_diagnosis_seconds: Option<f64>,
     pub limits: Vec<Limit>,
+    /// The out-of-library types' ranges and detection limits.
+    pub outside_limits: Vec<OutsideLimit>,
     pub thresholds: BlindThresholds,
+}
+
+/// An out-of-library type's drawn range and detection limit (score.json's
+/// `outside_limits`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OutsideLimit {
+    pub kind: Outside,
+    pub outside_span: bool,
+    pub low: f64,
+    pub high: f64,
+    pub detection_limit: f64,
 }
 
 /// The median (upper middle for an even count) of the finite values.
@@ -592,6 +663,10 @@ pub fn summarize(s: &[Scored], n: usize, seed: u64) -> Summary {
         })
         .collect();
     let outside_above: Vec<&Scored> = outside.iter().copied().filter(|r| r.above_limit).collect();
+    let span_out = |r: &&Scored| r.outside.is_some_and(|o| o.outside_span());
+    let out_span: Vec<&Scored> = outside.iter().copied().filter(span_out).collect();
+    let out_span_above: Vec<&Scored> = outside_above.iter().copied().filter(span_out).collect();
+    let unknown = |r: &Scored| r.verdict == Answer::Unknown;
     Summary {
         n,
         seed,
@@ -606,6 +681,13 @@ pub fn summarize(s: &[Scored], n: usize, seed: u64) -> Summary {
             outside_above.len(),
         ),
         outside_above_limit_records: outside_above.len(),
+        unknown_on_outside_span: frac(count(&out_span, &unknown), out_span.len()),
+        outside_span_records: out_span.len(),
+        unknown_on_outside_span_above_limit: frac(
+            count(&out_span_above, &unknown),
+            out_span_above.len(),
+        ),
+        outside_span_above_limit_records: out_span_above.len(),
         top1_single_all_sizes: frac(count(&single, &|r| r.correct), single.len()),
         false_attribution_on_outside: frac(count(&outside, &named), outside.len()),
         outside_records: outside.len(),
@@ -656,6 +738,19 @@ pub fn summarize(s: &[Scored], n: usize, seed: u64) -> Summary {
                 }
             })
             .collect(),
+        outside_limits: Outside::ALL
+            .iter()
+            .map(|&kind| {
+                let r = kind.size_range();
+                OutsideLimit {
+                    kind,
+                    outside_span: kind.outside_span(),
+                    low: r.low,
+                    high: r.high,
+                    detection_limit: r.limit,
+                }
+            })
+            .collect(),
         thresholds: BlindThresholds {
             t_sig: diagnose::T_SIG,
             gap_min: diagnose::GAP_MIN,
@@ -671,7 +766,7 @@ pub fn confusion(s: &[Scored]) -> BTreeMap<String, BTreeMap<String, usize>> {
         let first = r.truth.first().map_or("?", |e| e.name());
         let t = match r.category {
             Category::None => "none".to_string(),
-            Category::Outside => format!("outside:{first}"),
+            Category::Outside => format!("outside:{}", r.outside.map_or(first, |o| o.name())),
             Category::Double => "two effects".to_string(),
             Category::Single => first.to_string(),
         };
@@ -740,6 +835,16 @@ fn markdown(sm: &Summary, s: &[Scored]) -> String {
         pct(sm.unknown_on_outside_above_limit)
     ));
     m.push_str(&format!(
+        "| `unknown` on out-of-library records outside the diagnosis's span ({}) | {} | |\n",
+        sm.outside_span_records,
+        pct(sm.unknown_on_outside_span)
+    ));
+    m.push_str(&format!(
+        "| `unknown` on those above their detection limit ({}) | {} | ≥ 80 % |\n",
+        sm.outside_span_above_limit_records,
+        pct(sm.unknown_on_outside_span_above_limit)
+    ));
+    m.push_str(&format!(
         "| false attribution on out-of-library records | {} | |\n",
         pct(sm.false_attribution_on_outside)
     ));
@@ -786,8 +891,13 @@ fn markdown(sm: &Summary, s: &[Scored]) -> String {
     }
     m.push_str("\n## Records\n\n| id | category | truth (size) | verdict | OE closure | oracle |\n|---|---|---|---|---|---|\n");
     for r in s {
-        let truth: Vec<String> = r
+        let names: Vec<&str> = r
             .truth
+            .iter()
+            .map(|e| e.name())
+            .chain(r.outside.map(|o| o.name()))
+            .collect();
+        let truth: Vec<String> = names
             .iter()
             .zip(&r.sizes)
             .map(|(t, z)| format!("{t} ({z:.3e})"))

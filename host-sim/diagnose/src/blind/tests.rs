@@ -8,6 +8,7 @@ fn rec(category: Category, truth: &[Effect], verdict: Answer, above: bool) -> Sc
         id: "rec".into(),
         category,
         truth: truth.to_vec(),
+        outside: None,
         sizes: truth.iter().map(|_| 1.0).collect(),
         verdict,
         secondary: None,
@@ -145,4 +146,99 @@ fn summary_shares() {
     // closure 0.9 against the oracle's 1.0
     assert!((sm.median_closure_over_oracle.unwrap() - 0.9).abs() < 1e-12);
     assert_eq!(sm.double_one_named, None);
+}
+
+/// An out-of-library record of a hook type.
+fn out(kind: Outside, verdict: Answer, above: bool) -> Scored {
+    Scored {
+        outside: Some(kind),
+        sizes: vec![1.0],
+        ..rec(Category::Outside, &[], verdict, above)
+    }
+}
+
+#[test]
+fn outside_types_are_scored_by_span_and_limit() {
+    use Outside::*;
+    let s = vec![
+        out(CoulombFriction, Answer::Unknown, true),
+        out(SpuriousMode, Answer::None, true),
+        out(ChargingDrift, Answer::Effect(Effect::ThermalDrift), false),
+        out(PickoffLag, Answer::Effect(Effect::Anisodamping), true),
+        out(PickoffLag, Answer::Unknown, true),
+    ];
+    assert!(s[0].correct && !s[1].correct && !s[2].correct && s[4].correct);
+    let sm = summarize(&s, 5, 1);
+    assert_eq!(sm.outside_records, 5);
+    assert_eq!(sm.unknown_on_outside, Some(0.4));
+    // the span's share leaves the pick-off lag (in span) out
+    assert_eq!(sm.outside_span_records, 3);
+    assert_eq!(sm.unknown_on_outside_span, Some(1.0 / 3.0));
+    assert_eq!(sm.outside_span_above_limit_records, 2);
+    assert_eq!(sm.unknown_on_outside_span_above_limit, Some(0.5));
+    assert_eq!(sm.false_attribution_on_outside, Some(0.4));
+    let c = confusion(&s);
+    assert_eq!(c["outside:pickoff_lag"]["anisodamping"], 1);
+    assert_eq!(c["outside:charging_drift"]["thermal_drift"], 1);
+    assert_eq!(sm.outside_limits.len(), Outside::ALL.len());
+    let md = markdown(&sm, &s);
+    assert!(
+        md.contains("| rec | outside | coulomb_friction (1.000e0) | unknown |"),
+        "{md}"
+    );
+    assert!(
+        md.contains("outside the diagnosis's span (3) | 33 %"),
+        "{md}"
+    );
+}
+
+#[test]
+fn draws_hold_every_outside_type_through_the_hook_only() {
+    let d = draw(400, 11);
+    let sc = Scenario::load("characterise").unwrap();
+    let outs: Vec<&Draw> = d
+        .iter()
+        .filter(|r| r.category == Category::Outside)
+        .collect();
+    // 25 % of the draw, every type, each record's effect in `outside` (not in `effects`)
+    assert!(outs.len() > 70 && outs.len() < 130, "{}", outs.len());
+    for kind in Outside::ALL {
+        let k: Vec<&&Draw> = outs
+            .iter()
+            .filter(|r| r.outside.is_some_and(|o| o.kind == kind))
+            .collect();
+        assert!(k.len() >= 10, "{kind}: {}", k.len());
+        let r = kind.size_range();
+        for x in &k {
+            let o = x.outside.unwrap();
+            assert!(x.effects.is_empty());
+            assert!(o.size.abs() >= r.low && o.size.abs() <= r.high, "{o:?}");
+            let h = x.hook(&sc).unwrap();
+            assert_eq!((h.name, h.p[0]), (kind.name(), o.size));
+            assert!(x.size_over_limit() == o.size.abs() / r.limit);
+        }
+        // both sides of the detection limit are drawn
+        assert!(k.iter().any(|x| x.size_over_limit() >= 1.0));
+        assert!(k.iter().any(|x| x.size_over_limit() < 1.0));
+    }
+    assert!(
+        d.iter()
+            .all(|r| (r.category == Category::Outside) == r.outside.is_some())
+    );
+    // labels.json round-trips the out-of-library spec
+    let j = serde_json::to_string(&Labels {
+        seed: 11,
+        records: d.clone(),
+    })
+    .unwrap();
+    let back: Labels = serde_json::from_str(&j).unwrap();
+    assert_eq!(back.records.len(), d.len());
+    for (a, b) in back.records.iter().zip(&d) {
+        assert_eq!(a.outside.map(|o| o.kind), b.outside.map(|o| o.kind));
+        let (x, y) = (
+            a.outside.map_or(0.0, |o| o.size),
+            b.outside.map_or(0.0, |o| o.size),
+        );
+        assert!((x - y).abs() <= 1e-15 * y.abs(), "{x} {y}");
+    }
 }

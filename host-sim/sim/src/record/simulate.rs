@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::{Record, RecordHeader, RecordRow, write_record};
 use crate::effects::Effects;
+use crate::plant::hook::PlantHook;
 use crate::runner::{self, Device};
 use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, Scenario};
 use crate::summary::PhysicalValues;
@@ -60,8 +61,22 @@ pub fn simulate_record_with(
     opts: &RecordOptions,
     progress: &mut dyn FnMut(f64),
 ) -> anyhow::Result<(Record, RecordTruth)> {
+    simulate_record_ext(sc, opts, None, progress)
+}
+
+/// [`simulate_record_with`] with an external term of the plant ([`PlantHook`]: a force,
+/// states and a pick-off offset the simulator does not know; the truth names it in
+/// `external_term`).
+pub fn simulate_record_ext(
+    sc: &Scenario,
+    opts: &RecordOptions,
+    hook: Option<PlantHook>,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<(Record, RecordTruth)> {
     let gamma_per_dps = paragyro_core::physics::gamma_from_rate_dps(1.0, sc.omega0_rad_s());
-    let effects = Effects::from_specs(&opts.effects, gamma_per_dps).map_err(anyhow::Error::msg)?;
+    let mut effects =
+        Effects::from_specs(&opts.effects, gamma_per_dps).map_err(anyhow::Error::msg)?;
+    effects.hook = hook;
     let temp = opts
         .temp
         .or((effects.tcf_ppm_k != 0.0).then_some(DEFAULT_TEMP_PROFILE));
@@ -116,7 +131,8 @@ pub fn simulate_record_with(
         pump_centre_initial_hz,
         pump_centre_final_hz: est.pump_centre_hz(),
     };
-    let truth = record_truth(sc, opts, seed, rows.len(), t_end, closed_loop);
+    let mut truth = record_truth(sc, opts, seed, rows.len(), t_end, closed_loop);
+    truth.external_term = hook.map(|h| h.to_string());
     let rec = Record {
         header,
         rows,
@@ -167,6 +183,9 @@ pub struct RecordTruth {
     pub events: Vec<TruthEvent>,
     /// The effects added to the simulated device.
     pub effects: Vec<EffectSpec>,
+    /// An external term of the plant ([`PlantHook`], `name(parameters)`), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub external_term: Option<String>,
     /// Whether `rate_ref_dps` was written.
     pub rate_table: bool,
     /// The core that closed the loop while recording.
@@ -313,6 +332,7 @@ fn record_truth(
         plant_end: plant(t_end),
         events,
         effects: opts.effects.clone(),
+        external_term: None,
         rate_table: opts.rate_table,
         closed_loop,
         twin_ignored: sc.twin.is_some(),
@@ -354,7 +374,18 @@ pub fn write_simulated_record(
     opts: &RecordOptions,
     progress: &mut dyn FnMut(f64),
 ) -> anyhow::Result<(RecordFiles, Record)> {
-    let (rec, mut truth) = simulate_record_with(sc, opts, progress)
+    write_simulated_record_ext(sc, out, opts, None, progress)
+}
+
+/// [`write_simulated_record`] with an external term of the plant ([`simulate_record_ext`]).
+pub fn write_simulated_record_ext(
+    sc: &Scenario,
+    out: &Path,
+    opts: &RecordOptions,
+    hook: Option<PlantHook>,
+    progress: &mut dyn FnMut(f64),
+) -> anyhow::Result<(RecordFiles, Record)> {
+    let (rec, mut truth) = simulate_record_ext(sc, opts, hook, progress)
         .with_context(|| format!("simulating scenario '{}'", sc.name))?;
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
