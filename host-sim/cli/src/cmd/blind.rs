@@ -25,12 +25,15 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         paragyro_diagnose::blind::run(a.n, a.seed, &a.out, &|m| note(m)).map_err(fail(EXIT_RUN))?;
     let p = |v: Option<f64>| v.map_or("–".into(), |x| format!("{:.0} %", 100.0 * x));
     ctx.say(&format!(
-        "Blind benchmark, N = {}, seed {}:\n  top-1 (single, above limit) {}\n  unknown on out-of-library {}\n  false alarms on clean {}\n  median closure / oracle {}\nWrote {}/score.md and score.json\n",
+        "Blind benchmark, N = {}, seed {}:\n  top-1 (single, above limit) {}\n  unknown on out-of-library {} (outside the diagnosis's span, above limit: {} of {})\n  false alarms on clean {}\n  parameters within 1σ {}\n  median closure / oracle {}\nWrote {}/score.md and score.json\n",
         a.n,
         a.seed,
         p(s.top1_single_above_limit),
         p(s.unknown_on_outside),
+        p(s.unknown_on_outside_span_above_limit),
+        s.outside_span_above_limit_records,
         p(s.false_alarms_on_clean),
+        p(s.parameter_coverage_1sigma),
         p(s.median_closure_over_oracle),
         a.out.display()
     ))
