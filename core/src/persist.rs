@@ -100,6 +100,7 @@ pub fn crc32(bytes: &[u8]) -> u32 {
 
 /// CRC-32 of the configuration values a snapshot depends on: f0, fs, L0, the pump
 /// centre and the nominal design.
+#[inline(never)]
 pub fn config_crc(cfg: &Config) -> u32 {
     let mut buf = [0u8; 8 * 16];
     let vals = [cfg.f0_hz, cfg.fs_hz, cfg.l0_um, cfg.pump_centre_hz];
@@ -139,6 +140,7 @@ impl<'a> Cursor<'a, &'a [u8; SNAPSHOT_LEN]> {
 
 impl Snapshot {
     /// The record: magic, version, length, the fields, CRC-32 of all before it.
+    #[inline(never)]
     pub fn encode(&self) -> [u8; SNAPSHOT_LEN] {
         let mut out = [0u8; SNAPSHOT_LEN];
         let mut w = Cursor {
@@ -164,6 +166,7 @@ impl Snapshot {
 
     /// Reads a record (the first [`SNAPSHOT_LEN`] bytes of `bytes`); checks the magic,
     /// the version and the CRC.
+    #[inline(never)]
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
         let Some(rec) = bytes.first_chunk::<SNAPSHOT_LEN>() else {
             return Err(SnapshotError::Short);
@@ -212,6 +215,7 @@ const SETTLED_BIT: u32 = 1 << 5;
 impl<T: Real> Estimator<T> {
     /// The current estimate as a snapshot (take it when the health is settled: a
     /// snapshot that was not is refused at boot).
+    #[inline(never)]
     pub fn snapshot(&self) -> Snapshot {
         let (theta1, theta2) = self.theta();
         Snapshot {
@@ -227,6 +231,7 @@ impl<T: Real> Estimator<T> {
     /// Checks that `snap` fits this estimator: its configuration, settled when taken,
     /// finite, every θ within 2|θ_design| of the design (the re-linearisation's own
     /// bound) and the pump centre within [`WARM_PUMP_TOL`] of the configured one.
+    #[inline(never)]
     pub fn check_snapshot(&self, snap: &Snapshot) -> Result<(), SnapshotError> {
         let cfg = self.config();
         if snap.config_crc != config_crc(cfg) {
@@ -251,6 +256,7 @@ impl<T: Real> Estimator<T> {
     /// trace per parameter (within [[`WARM_P_MIN`], `rls.p_reset`]) and jumps the pump
     /// centre to the stored one. Refused (nothing changed) if [`Self::check_snapshot`]
     /// fails.
+    #[inline(never)]
     pub fn warm_start(&mut self, snap: &Snapshot) -> Result<(), SnapshotError> {
         self.check_snapshot(snap)?;
         let p_reset = self.config().rls.p_reset;
@@ -260,7 +266,10 @@ impl<T: Real> Estimator<T> {
         st.lin.move_to(snap.theta1, snap.theta2);
         st.rls1.set_estimate([T::ZERO; 8]);
         st.rls2.set_estimate([T::ZERO; 6]);
-        let p = |tr: f64, n: f64| T::from_f64((tr / n).clamp(WARM_P_MIN, p_reset.max(WARM_P_MIN)));
+        // max/min, not f64::clamp: its NaN/ordering assertion formats f64s and pulled
+        // ≈ 10 KB of float formatting into the stm32f405 image
+        let p_max = p_reset.max(WARM_P_MIN);
+        let p = |tr: f64, n: f64| T::from_f64((tr / n).max(WARM_P_MIN).min(p_max));
         st.rls1.reset_covariance(p(snap.traces[0], 8.0));
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
         st.sched
@@ -270,6 +279,7 @@ impl<T: Real> Estimator<T> {
 
     /// The boot path: a warm start from `record` (the stored bytes, `None` if the store
     /// is empty), or the design values and the reason ([`Start::Cold`]).
+    #[inline(never)]
     pub fn boot_from(&mut self, record: Option<&[u8]>) -> Start {
         let snap = match record.map(Snapshot::decode) {
             None => return Start::Cold(SnapshotError::Missing),
