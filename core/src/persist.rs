@@ -10,7 +10,8 @@
 //! [`Estimator::warm_start`] applies a snapshot to a freshly built estimator: the RLS
 //! linearises about the stored θ̂ (δθ = 0), its covariance restarts at the stored
 //! trace per parameter (bounded by `rls.p_reset`), and the pump centre jumps to the
-//! stored one. The start-up gate still runs (the filters need it). If the device
+//! stored one. The start-up gate still runs, shortened to [`WARM_GATE_S`] (the filters
+//! need it, the identification does not: measured). If the device
 //! changed while it was off, the change detector resets the covariance as after any
 //! change. [`Estimator::boot_from`] is the boot path: a missing, corrupt, foreign or
 //! implausible record leaves the design values and says why ([`Start::Cold`]).
@@ -31,6 +32,13 @@ pub const SNAPSHOT_VERSION: u16 = 1;
 pub const SNAPSHOT_MAGIC: [u8; 4] = *b"PGWS";
 /// Smallest restored covariance per parameter (scaled units; the RLS must still move).
 pub const WARM_P_MIN: f64 = 1e-9;
+/// The start-up gate of a warm start, s (the design's `monitor.gate_startup_s` is 0.5 s):
+/// the rows' filters and the plant's start-up transient still need it, but not the
+/// identification. Measured (`cargo test -p paragyro-simulator --lib warm_gates_swept --
+/// --ignored --nocapture`, identify, seeds 13–15, dither on and off): with 0.25 s the warm
+/// estimate stays within the floors from the first tick as with 0.5 s; with 0.1 s the
+/// first updates on transient rows pushed it out (back after 1.03 s, or never).
+pub const WARM_GATE_S: f64 = 0.25;
 /// A stored pump centre further than this (relative) from the configured one is
 /// implausible.
 pub const WARM_PUMP_TOL: f64 = 0.05;
@@ -253,9 +261,9 @@ impl<T: Real> Estimator<T> {
 
     /// Starts warm from `snap` (call on a freshly built estimator, before the first
     /// step): linearises about the stored θ̂, restarts the covariances at the stored
-    /// trace per parameter (within [[`WARM_P_MIN`], `rls.p_reset`]) and jumps the pump
-    /// centre to the stored one. Refused (nothing changed) if [`Self::check_snapshot`]
-    /// fails.
+    /// trace per parameter (within [[`WARM_P_MIN`], `rls.p_reset`]), jumps the pump
+    /// centre to the stored one and shortens the start-up gate to [`WARM_GATE_S`].
+    /// Refused (nothing changed) if [`Self::check_snapshot`] fails.
     #[inline(never)]
     pub fn warm_start(&mut self, snap: &Snapshot) -> Result<(), SnapshotError> {
         self.check_snapshot(snap)?;
@@ -274,7 +282,23 @@ impl<T: Real> Estimator<T> {
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
+        let fs = self.config().fs_hz;
+        let w = &mut self.design_mut().watch;
+        w.gate_startup = w.gate_startup.min((WARM_GATE_S * fs) as u64);
         Ok(())
+    }
+
+    /// For measurements only (`warm_gates_swept`): the start-up gate and the settle
+    /// window set to `gate_s` and `window_s` (the settle window then holds for the whole
+    /// run, after every reset too).
+    pub fn set_start_gates(&mut self, gate_s: f64, window_s: f64) {
+        let fs = self.config().fs_hz;
+        let tol = self.config().retune.settle_tol;
+        let w = &mut self.design_mut().watch;
+        w.gate_startup = (gate_s * fs) as u64;
+        let need = ((window_s * fs) / crate::estimator::SETTLE_EVERY as f64) as usize + 1;
+        w.settle = crate::monitor::SettleDesign::new(crate::estimator::SETTLE_EVERY, need, tol);
+        w.settle_window = (window_s * fs) as u64;
     }
 
     /// The boot path: a warm start from `record` (the stored bytes, `None` if the store

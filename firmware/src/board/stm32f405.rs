@@ -150,20 +150,25 @@ mod warm {
             }
         }
 
-        /// One tick of the save logic (after the tick's work).
+        /// One tick of the save logic (tick `k`, after its work), and the 10 Hz line.
         #[inline(never)]
-        pub fn poll(&mut self, k: u32, est: &Estimator<f32>) {
+        pub fn tick(&mut self, k: u32, est: &Estimator<f32>) {
             let c0 = DWT::cycle_count();
             let ev = self.saver.poll(&mut self.store, k, est);
             self.poll_max = self.poll_max.max(DWT::cycle_count().wrapping_sub(c0));
             if ev != SaveEvent::Idle {
                 defmt::info!("warm-start record: {}", ev);
             }
+            if k.wrapping_add(1)
+                .is_multiple_of(super::super::TELEMETRY_EVERY)
+            {
+                self.report();
+            }
         }
 
         /// The 10 Hz line: how the run started and what the saves did.
         #[inline(never)]
-        pub fn report(&mut self) {
+        fn report(&mut self) {
             defmt::info!(
                 "start {}, records {=u32} failed {=u32} full {=bool}, save poll max {=u32} cycles",
                 self.boot.start,
@@ -174,6 +179,22 @@ mod warm {
             );
             self.poll_max = 0;
         }
+    }
+}
+
+/// Without the feature: nothing (no code in the image).
+#[cfg(not(feature = "warm-start"))]
+mod warm {
+    use paragyro_core::Estimator;
+    use stm32f4xx_hal::pac::FLASH;
+
+    pub struct Warm;
+
+    impl Warm {
+        pub fn boot(_flash: FLASH, _est: &mut Estimator<f32>) -> Warm {
+            Warm
+        }
+        pub fn tick(&mut self, _k: u32, _est: &Estimator<f32>) {}
     }
 }
 
@@ -323,7 +344,6 @@ fn main() -> ! {
     {
         fail("configuration rejected")
     }
-    #[cfg(feature = "warm-start")]
     let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut());
     let app = &mut app;
     // a real ADXL355 is noisy: 8 identical X and Y codes in a row mean a stuck device
@@ -361,10 +381,9 @@ fn main() -> ! {
         let dt = DWT::cycle_count().wrapping_sub(c0);
         cycles_sum = cycles_sum.saturating_add(dt);
         cycles_max = cycles_max.max(dt);
-        #[cfg(feature = "warm-start")]
-        warm.poll(k, app.estimator());
         #[cfg(feature = "capture")]
         super::capture_tick(k, app);
+        warm.tick(k, app.estimator());
         k = k.wrapping_add(1);
         if k.is_multiple_of(super::TELEMETRY_EVERY) {
             super::telemetry(k, cfg.fs_hz, app, &r);
@@ -375,8 +394,6 @@ fn main() -> ! {
                 super::TELEMETRY_EVERY,
                 drdy_timeouts
             );
-            #[cfg(feature = "warm-start")]
-            warm.report();
             cycles_sum = 0;
             cycles_max = 0;
         }
