@@ -31,6 +31,7 @@ use crate::physics::{Physical, physical_from_theta, rate_dps_from_gamma};
 use crate::real::Real;
 use crate::rows::{Known, NROWS, RowSet};
 use design::Design;
+pub(crate) use design::SETTLE_EVERY;
 use state::State;
 
 pub use crate::health::{Counters, Health};
@@ -90,6 +91,11 @@ impl<T: Real> Estimator<T> {
     /// (`persist`: the warm start) that live outside this module.
     pub(crate) fn parts_mut(&mut self) -> (&Design<T>, &mut State<T>) {
         (&self.design, &mut self.state)
+    }
+
+    /// The design, mutable (`persist`: a warm start's shorter start-up gate).
+    pub(crate) fn design_mut(&mut self) -> &mut Design<T> {
+        &mut self.design
     }
 
     /// Processes one 500 Hz sample. Never fails, never panics, never allocates.

@@ -10,7 +10,8 @@
 //! [`Estimator::warm_start`] applies a snapshot to a freshly built estimator: the RLS
 //! linearises about the stored θ̂ (δθ = 0), its covariance restarts at the stored
 //! trace per parameter (bounded by `rls.p_reset`), and the pump centre jumps to the
-//! stored one. The start-up gate still runs (the filters need it). If the device
+//! stored one. The start-up gate still runs, shortened to [`WARM_GATE_S`] (the filters
+//! need it, the identification does not: measured). If the device
 //! changed while it was off, the change detector resets the covariance as after any
 //! change. [`Estimator::boot_from`] is the boot path: a missing, corrupt, foreign or
 //! implausible record leaves the design values and says why ([`Start::Cold`]).
@@ -31,6 +32,13 @@ pub const SNAPSHOT_VERSION: u16 = 1;
 pub const SNAPSHOT_MAGIC: [u8; 4] = *b"PGWS";
 /// Smallest restored covariance per parameter (scaled units; the RLS must still move).
 pub const WARM_P_MIN: f64 = 1e-9;
+/// The start-up gate of a warm start, s (the design's `monitor.gate_startup_s` is 0.5 s):
+/// the rows' filters and the plant's start-up transient still need it, but not the
+/// identification. Measured (`cargo test -p paragyro-simulator --lib warm_gates_swept --
+/// --ignored --nocapture`, identify, seeds 13–15, dither on and off): with 0.25 s the warm
+/// estimate stays within the floors from the first tick as with 0.5 s; with 0.1 s the
+/// first updates on transient rows pushed it out (back after 1.03 s, or never).
+pub const WARM_GATE_S: f64 = 0.25;
 /// A stored pump centre further than this (relative) from the configured one is
 /// implausible.
 pub const WARM_PUMP_TOL: f64 = 0.05;
@@ -100,6 +108,7 @@ pub fn crc32(bytes: &[u8]) -> u32 {
 
 /// CRC-32 of the configuration values a snapshot depends on: f0, fs, L0, the pump
 /// centre and the nominal design.
+#[inline(never)]
 pub fn config_crc(cfg: &Config) -> u32 {
     let mut buf = [0u8; 8 * 16];
     let vals = [cfg.f0_hz, cfg.fs_hz, cfg.l0_um, cfg.pump_centre_hz];
@@ -139,6 +148,7 @@ impl<'a> Cursor<'a, &'a [u8; SNAPSHOT_LEN]> {
 
 impl Snapshot {
     /// The record: magic, version, length, the fields, CRC-32 of all before it.
+    #[inline(never)]
     pub fn encode(&self) -> [u8; SNAPSHOT_LEN] {
         let mut out = [0u8; SNAPSHOT_LEN];
         let mut w = Cursor {
@@ -164,6 +174,7 @@ impl Snapshot {
 
     /// Reads a record (the first [`SNAPSHOT_LEN`] bytes of `bytes`); checks the magic,
     /// the version and the CRC.
+    #[inline(never)]
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, SnapshotError> {
         let Some(rec) = bytes.first_chunk::<SNAPSHOT_LEN>() else {
             return Err(SnapshotError::Short);
@@ -212,6 +223,7 @@ const SETTLED_BIT: u32 = 1 << 5;
 impl<T: Real> Estimator<T> {
     /// The current estimate as a snapshot (take it when the health is settled: a
     /// snapshot that was not is refused at boot).
+    #[inline(never)]
     pub fn snapshot(&self) -> Snapshot {
         let (theta1, theta2) = self.theta();
         Snapshot {
@@ -227,6 +239,7 @@ impl<T: Real> Estimator<T> {
     /// Checks that `snap` fits this estimator: its configuration, settled when taken,
     /// finite, every θ within 2|θ_design| of the design (the re-linearisation's own
     /// bound) and the pump centre within [`WARM_PUMP_TOL`] of the configured one.
+    #[inline(never)]
     pub fn check_snapshot(&self, snap: &Snapshot) -> Result<(), SnapshotError> {
         let cfg = self.config();
         if snap.config_crc != config_crc(cfg) {
@@ -248,9 +261,10 @@ impl<T: Real> Estimator<T> {
 
     /// Starts warm from `snap` (call on a freshly built estimator, before the first
     /// step): linearises about the stored θ̂, restarts the covariances at the stored
-    /// trace per parameter (within [[`WARM_P_MIN`], `rls.p_reset`]) and jumps the pump
-    /// centre to the stored one. Refused (nothing changed) if [`Self::check_snapshot`]
-    /// fails.
+    /// trace per parameter (within [[`WARM_P_MIN`], `rls.p_reset`]), jumps the pump
+    /// centre to the stored one and shortens the start-up gate to [`WARM_GATE_S`].
+    /// Refused (nothing changed) if [`Self::check_snapshot`] fails.
+    #[inline(never)]
     pub fn warm_start(&mut self, snap: &Snapshot) -> Result<(), SnapshotError> {
         self.check_snapshot(snap)?;
         let p_reset = self.config().rls.p_reset;
@@ -260,16 +274,36 @@ impl<T: Real> Estimator<T> {
         st.lin.move_to(snap.theta1, snap.theta2);
         st.rls1.set_estimate([T::ZERO; 8]);
         st.rls2.set_estimate([T::ZERO; 6]);
-        let p = |tr: f64, n: f64| T::from_f64((tr / n).clamp(WARM_P_MIN, p_reset.max(WARM_P_MIN)));
+        // max/min, not f64::clamp: its NaN/ordering assertion formats f64s and pulled
+        // ≈ 10 KB of float formatting into the stm32f405 image
+        let p_max = p_reset.max(WARM_P_MIN);
+        let p = |tr: f64, n: f64| T::from_f64((tr / n).max(WARM_P_MIN).min(p_max));
         st.rls1.reset_covariance(p(snap.traces[0], 8.0));
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
+        let fs = self.config().fs_hz;
+        let w = &mut self.design_mut().watch;
+        w.gate_startup = w.gate_startup.min((WARM_GATE_S * fs) as u64);
         Ok(())
+    }
+
+    /// For measurements only (`warm_gates_swept`): the start-up gate and the settle
+    /// window set to `gate_s` and `window_s` (the settle window then holds for the whole
+    /// run, after every reset too).
+    pub fn set_start_gates(&mut self, gate_s: f64, window_s: f64) {
+        let fs = self.config().fs_hz;
+        let tol = self.config().retune.settle_tol;
+        let w = &mut self.design_mut().watch;
+        w.gate_startup = (gate_s * fs) as u64;
+        let need = ((window_s * fs) / crate::estimator::SETTLE_EVERY as f64) as usize + 1;
+        w.settle = crate::monitor::SettleDesign::new(crate::estimator::SETTLE_EVERY, need, tol);
+        w.settle_window = (window_s * fs) as u64;
     }
 
     /// The boot path: a warm start from `record` (the stored bytes, `None` if the store
     /// is empty), or the design values and the reason ([`Start::Cold`]).
+    #[inline(never)]
     pub fn boot_from(&mut self, record: Option<&[u8]>) -> Start {
         let snap = match record.map(Snapshot::decode) {
             None => return Start::Cold(SnapshotError::Missing),

@@ -145,3 +145,21 @@ fn snapshot_of_an_estimator_is_what_it_holds() {
         Start::Cold(SnapshotError::Implausible)
     );
 }
+
+#[test]
+fn warm_start_shortens_the_start_up_gate_only() {
+    let cfg = Config::table2();
+    assert_eq!((cfg.monitor.gate_startup_s, cfg.fs_hz), (0.5, 500.0));
+    let mut cold = cfg.build::<f32>().unwrap();
+    let s = settled_snapshot(&cold);
+    assert_eq!(cold.boot_from(None), Start::Cold(SnapshotError::Missing));
+    let mut warm = cfg.build::<f32>().unwrap();
+    assert_eq!(warm.boot_from(Some(&s.encode())), Start::Warm);
+    let (c, w) = (cold.design_mut().watch, warm.design_mut().watch);
+    assert_eq!((c.gate_startup, w.gate_startup), (250, 125));
+    assert_eq!(w.gate_startup, (WARM_GATE_S * cfg.fs_hz) as u64);
+    assert_eq!(
+        (w.settle_window, w.gate_jump, w.gate_bad),
+        (c.settle_window, c.gate_jump, c.gate_bad)
+    );
+}

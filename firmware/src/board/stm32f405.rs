@@ -63,6 +63,141 @@ const GUARD_HALF_WIDTH_HZ: f64 = 400.0;
 /// A DRDY missing for this many cycles (4 ms, two periods) is counted as a timeout.
 const DRDY_TIMEOUT_CYCLES: u32 = SYSCLK_HZ / 250;
 
+/// The warm start on this board (feature `warm-start`: it does not fit the 64 KiB image
+/// budget yet, firmware/README.md "Warm start on the stm32f405 board").
+///
+/// The store is sectors 10 and 11 (128 KiB each; the `STORE` region of memory.x,
+/// outside the image's `FLASH` region). At boot the newest record goes into the
+/// estimator (or the boot is cold, and the reason is logged), and the spare sector is
+/// erased if it was used: the run's only erase, before the loop starts (1–4 s, the
+/// flash stalls). In the loop, [`Saver::poll`] programs at most 8 bytes per tick after
+/// the tick's work ([`SavePolicy::BOARD`]); its cycles (flash stalls included) are
+/// reported beside the tick's.
+#[cfg(feature = "warm-start")]
+mod warm {
+    use cortex_m::peripheral::DWT;
+    use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+    use paragyro_core::Estimator;
+    use paragyro_firmware::persist::{self, Boot, SaveEvent, SavePolicy, Saver, Store};
+    use stm32f4xx_hal::flash::{Error, FlashExt, LockedFlash};
+    use stm32f4xx_hal::pac::FLASH;
+
+    /// Offsets (from 0x0800_0000) of sectors 10 and 11, and their size.
+    const SLOT_A: u32 = 0x000C_0000;
+    const SLOT_B: u32 = 0x000E_0000;
+    const SLOT_LEN: u32 = 128 * 1024;
+
+    /// The HAL's flash as a [`NorFlash`], unlocked for each erase or write only (the
+    /// HAL's `UnlockedFlash` locks it again when dropped). The HAL erases and programs
+    /// with 8-bit parallelism (any supply voltage; a byte per program operation).
+    pub struct BoardFlash(LockedFlash);
+
+    impl ErrorType for BoardFlash {
+        type Error = Error;
+    }
+
+    impl ReadNorFlash for BoardFlash {
+        const READ_SIZE: usize = 1;
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Error> {
+            ReadNorFlash::read(&mut self.0, offset, bytes)
+        }
+        fn capacity(&self) -> usize {
+            ReadNorFlash::capacity(&self.0)
+        }
+    }
+
+    impl NorFlash for BoardFlash {
+        const WRITE_SIZE: usize = 1;
+        const ERASE_SIZE: usize = 128 * 1024;
+        #[inline(never)]
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Error> {
+            NorFlash::erase(&mut self.0.unlocked(), from, to)
+        }
+        #[inline(never)]
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Error> {
+            NorFlash::write(&mut self.0.unlocked(), offset, bytes)
+        }
+    }
+
+    /// The store, the save logic and what the boot did.
+    pub struct Warm {
+        store: Store<BoardFlash>,
+        saver: Saver,
+        boot: Boot,
+        /// Most cycles of one [`Saver::poll`] since the last report.
+        poll_max: u32,
+    }
+
+    impl Warm {
+        /// The boot: warm or cold (logged with the reason), then the spare erased.
+        #[inline(never)]
+        pub fn boot(flash: FLASH, est: &mut Estimator<f32>) -> Warm {
+            let Ok(mut store) = Store::new(
+                BoardFlash(LockedFlash::new(flash)),
+                SLOT_A,
+                SLOT_B,
+                SLOT_LEN,
+            ) else {
+                super::fail("flash store layout")
+            };
+            let boot = persist::boot(&mut store, est);
+            defmt::info!("start: {} (spare prepared: {})", boot.start, boot.prepared);
+            Warm {
+                store,
+                saver: Saver::new(SavePolicy::BOARD),
+                boot,
+                poll_max: 0,
+            }
+        }
+
+        /// One tick of the save logic (tick `k`, after its work), and the 10 Hz line.
+        #[inline(never)]
+        pub fn tick(&mut self, k: u32, est: &Estimator<f32>) {
+            let c0 = DWT::cycle_count();
+            let ev = self.saver.poll(&mut self.store, k, est);
+            self.poll_max = self.poll_max.max(DWT::cycle_count().wrapping_sub(c0));
+            if ev != SaveEvent::Idle {
+                defmt::info!("warm-start record: {}", ev);
+            }
+            if k.wrapping_add(1)
+                .is_multiple_of(super::super::TELEMETRY_EVERY)
+            {
+                self.report();
+            }
+        }
+
+        /// The 10 Hz line: how the run started and what the saves did.
+        #[inline(never)]
+        fn report(&mut self) {
+            defmt::info!(
+                "start {}, records {=u32} failed {=u32} full {=bool}, save poll max {=u32} cycles",
+                self.boot.start,
+                self.saver.written,
+                self.saver.failures,
+                self.saver.full,
+                self.poll_max
+            );
+            self.poll_max = 0;
+        }
+    }
+}
+
+/// Without the feature: nothing (no code in the image).
+#[cfg(not(feature = "warm-start"))]
+mod warm {
+    use paragyro_core::Estimator;
+    use stm32f4xx_hal::pac::FLASH;
+
+    pub struct Warm;
+
+    impl Warm {
+        pub fn boot(_flash: FLASH, _est: &mut Estimator<f32>) -> Warm {
+            Warm
+        }
+        pub fn tick(&mut self, _k: u32, _est: &Estimator<f32>) {}
+    }
+}
+
 /// Busy-wait delay on the core clock (driver init only).
 struct CycleDelay;
 
@@ -209,6 +344,7 @@ fn main() -> ! {
     {
         fail("configuration rejected")
     }
+    let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut());
     let app = &mut app;
     // a real ADXL355 is noisy: 8 identical X and Y codes in a row mean a stuck device
     app.set_accel_stuck_limit(paragyro_firmware::fil::ACCEL_STUCK_READS);
@@ -247,6 +383,7 @@ fn main() -> ! {
         cycles_max = cycles_max.max(dt);
         #[cfg(feature = "capture")]
         super::capture_tick(k, app);
+        warm.tick(k, app.estimator());
         k = k.wrapping_add(1);
         if k.is_multiple_of(super::TELEMETRY_EVERY) {
             super::telemetry(k, cfg.fs_hz, app, &r);

@@ -96,6 +96,17 @@ fn boot<T: Real>(sc: &Scenario, seed: u64, est: &mut Estimator<T>) -> Result<Boo
 /// settles, and an unsettled snapshot is refused); `dither` says whether the boots that
 /// are compared run with it.
 pub fn warm_vs_cold(duration_s: f64, seed: u64, dither: bool) -> Result<WarmReport> {
+    warm_vs_cold_gated(duration_s, seed, dither, None)
+}
+
+/// [`warm_vs_cold`] with the warm boot's start-up gate and settle window set to
+/// `gates` = (gate s, window s) (`Estimator::set_start_gates`).
+pub fn warm_vs_cold_gated(
+    duration_s: f64,
+    seed: u64,
+    dither: bool,
+    gates: Option<(f64, f64)>,
+) -> Result<WarmReport> {
     let mut sc_d = Scenario::builtin("identify").context("the built-in 'identify' is missing")?;
     sc_d.duration_s = duration_s;
     let mut sc = sc_d.clone();
@@ -121,6 +132,9 @@ pub fn warm_vs_cold(duration_s: f64, seed: u64, dither: bool) -> Result<WarmRepo
         Start::Warm => {}
         Start::Cold(e) => anyhow::bail!("the cold boot's snapshot was refused: {e:?}"),
     }
+    if let Some((g, w)) = gates {
+        warm_est.set_start_gates(g, w);
+    }
     anyhow::ensure!(Snapshot::decode(&record).is_ok());
     let warm = boot(&sc, seed.wrapping_add(1), &mut warm_est)?;
     Ok(WarmReport {
@@ -145,6 +159,9 @@ mod tests {
             r.warm.settled_s.unwrap() < r.cold.settled_s.unwrap(),
             "{r:?}"
         );
+        // the warm start's shorter start-up gate: settled one settle window after it
+        let floor = paragyro_core::persist::WARM_GATE_S + 0.5;
+        assert!(r.warm.settled_s.unwrap() <= floor + 1e-9, "{r:?}");
     }
 
     #[test]
@@ -152,6 +169,36 @@ mod tests {
         let r = warm_vs_cold(6.0, 13, false).unwrap();
         assert_eq!(r.cold.converged_s, None, "{r:?}");
         assert!(r.warm.converged_s.is_some(), "{r:?}");
+    }
+
+    #[test]
+    #[ignore = "measurement: cargo test -p paragyro-simulator --lib warm_gates_swept -- --ignored --nocapture"]
+    fn warm_gates_swept() {
+        let pairs = [
+            (0.5, 0.5),
+            (0.25, 0.5),
+            (0.1, 0.5),
+            (0.02, 0.5),
+            (0.25, 0.25),
+            (0.25, 0.1),
+            (0.1, 0.2),
+            (0.05, 0.1),
+        ];
+        for dither in [true, false] {
+            for seed in [13u64, 14, 15] {
+                for (g, w) in pairs {
+                    let r = warm_vs_cold_gated(20.0, seed, dither, Some((g, w))).unwrap();
+                    println!(
+                        "dither {dither} seed {seed} gate {g} window {w}: cold settled {:?} conv {:?}; warm settled {:?} conv {:?}; ratio {:?}",
+                        r.cold.settled_s,
+                        r.cold.converged_s,
+                        r.warm.settled_s,
+                        r.warm.converged_s,
+                        r.settled_ratio()
+                    );
+                }
+            }
+        }
     }
 
     #[test]
