@@ -929,6 +929,16 @@ mod tests {
     use crate::FailingSpi;
     use crate::drivers::ad9959::DEFAULT_SYSCLK_HZ;
 
+    /// Chips whose every transfer fails (the App's set-up and pure helpers only).
+    fn failing_chips() -> Chips<FailingSpi, FailingSpi, FailingSpi, FailingSpi> {
+        Chips {
+            adc_x: Ads131m08::new(FailingSpi::always_failing()),
+            adc_y: Ads131m08::new(FailingSpi::always_failing()),
+            accel: Adxl355::new(FailingSpi::always_failing()),
+            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
+        }
+    }
+
     /// The stuck-accelerometer test: off at 0; with a limit, refused from the limit-th
     /// identical read on, until the codes change.
     #[test]
@@ -1015,12 +1025,7 @@ mod tests {
     #[test]
     fn guard_test_by_bits_equals_contains() {
         let cfg = Config::table2();
-        let chips = Chips {
-            adc_x: Ads131m08::new(FailingSpi::always_failing()),
-            adc_y: Ads131m08::new(FailingSpi::always_failing()),
-            accel: Adxl355::new(FailingSpi::always_failing()),
-            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
-        };
+        let chips = failing_chips();
         let guard = PumpGuard::around(cfg.pump_centre_hz, 400.0);
         let cal = LockinCalibration::UNITY;
         let app = App::new(chips, &cfg, cal, cal, guard).unwrap();
@@ -1059,12 +1064,7 @@ mod tests {
     #[test]
     fn guard_plan_in_words_equals_the_f64_plan() {
         let cfg = Config::table2();
-        let chips = Chips {
-            adc_x: Ads131m08::new(FailingSpi::always_failing()),
-            adc_y: Ads131m08::new(FailingSpi::always_failing()),
-            accel: Adxl355::new(FailingSpi::always_failing()),
-            dds: Ad9959::new(FailingSpi::always_failing(), DEFAULT_SYSCLK_HZ),
-        };
+        let chips = failing_chips();
         let guard = PumpGuard::around(cfg.pump_centre_hz, 400.0);
         let cal = LockinCalibration::from_um_per_volt(
             [1.0; LOCKIN_CHANNELS],

@@ -663,14 +663,7 @@ impl GyroSim {
                     d: &Drive| {
             if HOOK && let Some(hk) = &hook {
                 let m = measure_fx(z, n, d, &fx);
-                let o = hk.offset(&hook::HookAt {
-                    tau,
-                    z: *z,
-                    w: *w,
-                    cos2psi: d.cos2psi,
-                    s: d.s,
-                    accel: [d.ax, d.ay],
-                });
+                let o = hk.offset(&hook::HookAt::at(tau, z, w, d));
                 [m[0] + o[0], m[1] + o[1]]
             } else if FX {
                 measure_fx(z, n, d, &fx)

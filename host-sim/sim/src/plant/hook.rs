@@ -42,6 +42,20 @@ pub struct HookAt {
     pub accel: [f64; 2],
 }
 
+impl HookAt {
+    /// The hook's view at time `tau` of plant state `z`, its own states `w` and the drive.
+    pub(super) fn at(tau: f64, z: &[f64; 4], w: &[f64; HOOK_STATES], d: &super::Drive) -> Self {
+        HookAt {
+            tau,
+            z: *z,
+            w: *w,
+            cos2psi: d.cos2psi,
+            s: d.s,
+            accel: [d.ax, d.ay],
+        }
+    }
+}
+
 /// The hook's right-hand side: `(force on [drive, sense], d/dτ of its states)`.
 pub type HookRhs = fn(&[f64; HOOK_PARAMS], &HookAt) -> ([f64; 2], [f64; HOOK_STATES]);
 
@@ -116,14 +130,7 @@ pub(super) fn rk4_step_hooked(
 ) -> ([f64; 4], [f64; HOOK_STATES]) {
     let f = |z: &[f64; 4], w: &[f64; HOOK_STATES], d: &super::Drive, tau: f64| {
         let b = super::rhs_fx(th, z, d, fx);
-        let at = HookAt {
-            tau,
-            z: *z,
-            w: *w,
-            cos2psi: d.cos2psi,
-            s: d.s,
-            accel: [d.ax, d.ay],
-        };
+        let at = HookAt::at(tau, z, w, d);
         let (force, dw) = hook.eval(&at);
         ([b[0], b[1] + force[0], b[2], b[3] + force[1]], dw)
     };
