@@ -220,6 +220,10 @@ pub struct SettleDesign<T> {
 }
 
 impl<T: Real> SettleDesign<T> {
+    /// How many values must agree.
+    pub fn need(&self) -> usize {
+        self.need
+    }
     /// Keeps one value every `every` samples; settled when the last `need` (≤ 16)
     /// values span less than `tol` relative.
     pub fn new(every: u64, need: usize, tol: f64) -> Self {
@@ -347,6 +351,27 @@ impl<T: Real> SettleTest<T> {
         };
         self.len = (self.len + 1).min(SETTLE_RING);
         self.verdict = self.evaluate(d);
+    }
+    /// A warm start: the history holds `keep` copies (at most `need − 1`) of the
+    /// remembered value `v`, so `need − keep` new values within the tolerance of it and of
+    /// each other settle; new values that disagree keep the test open until the
+    /// remembered ones have left the window, as from a cold start.
+    pub fn seed(&mut self, d: &SettleDesign<T>, v: T, keep: usize) {
+        self.clear();
+        if !v.is_finite() {
+            return;
+        }
+        for _ in 0..keep.min(d.need.saturating_sub(1)) {
+            if let Some(slot) = self.ring.get_mut(self.at) {
+                *slot = v;
+            }
+            self.at = if self.at + 1 >= SETTLE_RING {
+                0
+            } else {
+                self.at + 1
+            };
+            self.len = (self.len + 1).min(SETTLE_RING);
+        }
     }
     /// Settled now.
     pub fn settled(&self) -> bool {

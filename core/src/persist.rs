@@ -11,7 +11,8 @@
 //! linearises about the stored θ̂ (δθ = 0), its covariance restarts at the stored
 //! trace per parameter (bounded by `rls.p_reset`), and the pump centre jumps to the
 //! stored one. The start-up gate still runs, shortened to [`WARM_GATE_S`] (the filters
-//! need it, the identification does not: measured). If the device
+//! need it, the identification does not: measured), and the first settle starts from the
+//! restored ω̂y² ([`WARM_SETTLE_NEW`]). If the device
 //! changed while it was off, the change detector resets the covariance as after any
 //! change. [`Estimator::boot_from`] is the boot path: a missing, corrupt, foreign or
 //! implausible record leaves the design values and says why ([`Start::Cold`]).
@@ -39,6 +40,13 @@ pub const WARM_P_MIN: f64 = 1e-9;
 /// estimate stays within the floors from the first tick as with 0.5 s; with 0.1 s the
 /// first updates on transient rows pushed it out (back after 1.03 s, or never).
 pub const WARM_GATE_S: f64 = 0.25;
+/// The first settle of a warm start: the settle test's history starts with the restored
+/// ω̂y² in all but this many places, and the settle window counts from the end of the warm
+/// gate. So `WARM_SETTLE_NEW` fresh ω̂y² values (one every 25 samples, 0.05 s) that agree
+/// with the restored one and with each other declare it settled; values that disagree (the
+/// device changed while off) flush the restored ones as from a cold start. Later settles
+/// (after a reset) use the design's window as before.
+pub const WARM_SETTLE_NEW: usize = 2;
 /// A stored pump centre further than this (relative) from the configured one is
 /// implausible.
 pub const WARM_PUMP_TOL: f64 = 0.05;
@@ -283,8 +291,14 @@ impl<T: Real> Estimator<T> {
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
         let fs = self.config().fs_hz;
+        let wy2 = T::from_f64(self.wy2());
         let w = &mut self.design_mut().watch;
         w.gate_startup = w.gate_startup.min((WARM_GATE_S * fs) as u64);
+        let settle = w.settle;
+        let (_, st) = self.parts_mut();
+        st.warm_first = true;
+        let keep = settle.need().saturating_sub(WARM_SETTLE_NEW);
+        st.settle.seed(&settle, wy2, keep);
         Ok(())
     }
 

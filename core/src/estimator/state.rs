@@ -112,6 +112,9 @@ pub(crate) struct State<T: Real> {
     pub bad_gate_until: u64,
     /// Sample of the last covariance reset.
     pub last_reset: u64,
+    /// A warm start's first settle is due: the settle window counts from the end of the
+    /// start-up gate (`persist`); cleared by that settle and by any reset.
+    pub warm_first: bool,
     pub change_pending: bool,
     /// The anti-windup bound was learned at a settle since the last reset.
     pub bound_learned: bool,
@@ -149,6 +152,7 @@ impl<T: Real> State<T> {
             jump_gate_until: 0,
             bad_gate_until: 0,
             last_reset: 0,
+            warm_first: false,
             change_pending: false,
             bound_learned: false,
             was_settled: false,
@@ -189,6 +193,7 @@ impl<T: Real> State<T> {
             jump_gate_until,
             bad_gate_until,
             last_reset,
+            warm_first,
             change_pending,
             bound_learned,
             was_settled,
@@ -222,6 +227,7 @@ impl<T: Real> State<T> {
         *jump_gate_until = 0;
         *bad_gate_until = 0;
         *last_reset = 0;
+        *warm_first = false;
         *change_pending = false;
         *bound_learned = false;
         *was_settled = false;
@@ -244,6 +250,7 @@ impl<T: Real> State<T> {
             self.det1.rearm(&d.fit.change);
             self.det2.rearm(&d.fit.change);
             self.last_reset = self.k;
+            self.warm_first = false;
             self.change_pending = true;
             self.settle.clear();
             self.lift_trace_bound(d);

@@ -231,6 +231,7 @@ impl<T: Real> State<T> {
         }
         if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
             self.last_reset = k;
+            self.warm_first = false;
             self.change_pending = true;
             self.settle.clear();
             self.lift_trace_bound(d);
@@ -254,7 +255,11 @@ impl<T: Real> State<T> {
             self.settle.push(&d.watch.settle, k, wy2);
         }
         let window = d.watch.settle_window;
-        let settled = !gated && self.settle.settled() && k >= self.last_reset + window;
+        // a warm start's first settle: the window counts from the end of its gate
+        let window_ok =
+            k >= self.last_reset + window || (self.warm_first && k >= d.watch.gate_startup);
+        let settled = !gated && self.settle.settled() && window_ok;
+        self.warm_first &= !settled;
         if settled && !self.was_settled {
             *events |= event::SETTLED;
             self.change_pending = false;
