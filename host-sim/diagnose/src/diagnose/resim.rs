@@ -92,10 +92,9 @@ pub struct OutputError {
     pub above_noise: f64,
 }
 
-/// `E|Δn|²/E|n|²` of the lock-in output noise of white displacement noise (the simulator's
-/// lock-in at the record's settings, gyro at rest): the error's slow part barely moves
-/// from sample to sample, its noise part does, by this ratio.
-pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
+/// The simulator at the record's lock-in settings with white displacement noise (density
+/// 1e-6, seed 7), the Table 2 gyro at rest and its inputs: the noise references below.
+fn noise_sim(rec: &Record) -> anyhow::Result<(GyroSim, Theta, PlantInputs)> {
     let h = &rec.header;
     let omega0 = TAU * h.f0_hz;
     let cfg = SimConfig {
@@ -108,7 +107,7 @@ pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
         noise_density: 1e-6,
         seed: 7,
     };
-    let mut sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    let sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
     let mut th = Theta::table2();
     th.drive[5] = 0.0;
     th.drive[6] = 0.0;
@@ -118,6 +117,14 @@ pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
         ax: 0.0,
         ay: 0.0,
     };
+    Ok((sim, th, u))
+}
+
+/// `E|Δn|²/E|n|²` of the lock-in output noise of white displacement noise (the simulator's
+/// lock-in at the record's settings, gyro at rest): the error's slow part barely moves
+/// from sample to sample, its noise part does, by this ratio.
+pub fn lockin_noise_diff_ratio(rec: &Record) -> anyhow::Result<f64> {
+    let (mut sim, th, u) = noise_sim(rec)?;
     let mut prev: Option<LockinOut> = None;
     let (mut dd, mut nn) = (0.0, 0.0);
     for k in 0..600 {
@@ -171,27 +178,7 @@ fn channels(o: &LockinOut) -> [f64; 10] {
 /// second sample-to-sample differences per sample, µm².
 fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
     let h = &rec.header;
-    let omega0 = TAU * h.f0_hz;
-    let cfg = SimConfig {
-        omega0_rad_s: omega0,
-        fs_hz: h.fs_hz,
-        steps_per_period: 32,
-        omega_max: 1.05,
-        lpf_order: h.lockin_lpf_order,
-        lpf_hz: h.lockin_lpf_hz,
-        noise_density: 1e-6,
-        seed: 7,
-    };
-    let mut sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
-    let mut th = Theta::table2();
-    th.drive[5] = 0.0;
-    th.drive[6] = 0.0;
-    let u = PlantInputs {
-        omega: 1.0,
-        s: 1.0,
-        ax: 0.0,
-        ay: 0.0,
-    };
+    let (mut sim, th, u) = noise_sim(rec)?;
     let mut prev: Option<([f64; 10], [f64; 10])> = None;
     let mut last: Option<[f64; 10]> = None;
     let (mut dd, mut m) = ([0.0; 10], 0usize);
