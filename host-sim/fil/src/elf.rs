@@ -13,15 +13,22 @@ fn u32_at(b: &[u8], o: usize) -> anyhow::Result<u32> {
     Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
 }
 
-/// Every function symbol `(name, address with the Thumb bit cleared)`.
-pub fn function_symbols(elf: &[u8]) -> anyhow::Result<Vec<(String, u32)>> {
+/// The section header table of a little-endian ELF32 file: (offset, entry size, count).
+fn section_table(elf: &[u8]) -> anyhow::Result<(usize, usize, usize)> {
     ensure!(
         elf.get(..6) == Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]),
         "not a little-endian ELF32 file"
     );
-    let shoff = u32_at(elf, 0x20)? as usize;
-    let shentsize = u16_at(elf, 0x2E)? as usize;
-    let shnum = u16_at(elf, 0x30)? as usize;
+    Ok((
+        u32_at(elf, 0x20)? as usize,
+        u16_at(elf, 0x2E)? as usize,
+        u16_at(elf, 0x30)? as usize,
+    ))
+}
+
+/// Every function symbol `(name, address with the Thumb bit cleared)`.
+pub fn function_symbols(elf: &[u8]) -> anyhow::Result<Vec<(String, u32)>> {
+    let (shoff, shentsize, shnum) = section_table(elf)?;
     let section = |i: usize| -> anyhow::Result<(u32, usize, usize, usize)> {
         let o = shoff + i * shentsize;
         Ok((
@@ -80,13 +87,7 @@ pub fn markers(elf: &[u8]) -> anyhow::Result<[u32; 4]> {
 
 /// Size of every section by name.
 pub fn section_sizes(elf: &[u8]) -> anyhow::Result<Vec<(String, u64)>> {
-    ensure!(
-        elf.get(..6) == Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]),
-        "not a little-endian ELF32 file"
-    );
-    let shoff = u32_at(elf, 0x20)? as usize;
-    let shentsize = u16_at(elf, 0x2E)? as usize;
-    let shnum = u16_at(elf, 0x30)? as usize;
+    let (shoff, shentsize, shnum) = section_table(elf)?;
     let shstrndx = u16_at(elf, 0x32)? as usize;
     let hdr = |i: usize| shoff + i * shentsize;
     let str_off = u32_at(elf, hdr(shstrndx) + 16)? as usize;
