@@ -72,7 +72,8 @@ impl Bytes<'_> {
 /// the input is an opcode and its values (a sample with arbitrary bits in every
 /// channel, a pump jump or ramp, dither on/off or amplitude, retune on/off, or a run of
 /// plausible samples so that the RLS is actually updating). Never a panic; the pump
-/// command is never NaN, and the estimate stays finite.
+/// command is never NaN, the estimate stays finite, and a refused centre command changes
+/// nothing.
 pub fn estimator_step(data: &[u8]) {
     let mut est: Estimator<f32> = match Config::table2().build() {
         Ok(e) => e,
@@ -93,9 +94,18 @@ pub fn estimator_step(data: &[u8]) {
                 let out = est.step(&s);
                 pump = out.pump_hz_next;
             }
-            2 => est.command_pump_centre(b.f64(), b.u8() & 1 == 1),
+            2 => {
+                // a refused centre (NaN, ±∞, beyond ±10 % of the configured one) changes
+                // nothing
+                let before = est.pump_centre_hz();
+                if !est.command_pump_centre(b.f64(), b.u8() & 1 == 1) {
+                    assert_eq!(est.pump_centre_hz().to_bits(), before.to_bits());
+                }
+            }
             3 => est.set_dither(b.u8() & 1 == 1),
-            4 => est.set_dither_pump_hz(b.f64()),
+            4 => {
+                let _ = est.set_dither_pump_hz(b.f64());
+            }
             5 => est.set_retune(b.u8() & 1 == 1),
             _ => {
                 // plausible samples (the RLS runs past its start-up gate)

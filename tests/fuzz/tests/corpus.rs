@@ -1,7 +1,12 @@
-//! The fuzz harnesses as a plain, bounded test (the CI run): every target over its seed
-//! corpus and a fixed number of seeded mutations of it (bit flips, byte sets, cuts,
-//! insertions, splices of awkward tokens). Runs on stable without libFuzzer; a crash
-//! found by `cargo fuzz` goes into `regressions/<target>/` and is replayed here.
+//! The fuzz harnesses as a plain, bounded test: every target over its seed corpus and a
+//! fixed number of seeded mutations of it (bit flips, byte sets, cuts, insertions, splices
+//! of awkward tokens). Runs on stable without libFuzzer or a C++ compiler (CI runs the
+//! libFuzzer targets themselves: `cargo xtask fuzz`); a crash found by libFuzzer goes into
+//! `regressions/<target>/` and is replayed here too.
+//!
+//! The seeds are also libFuzzer's committed seeds (`seeds/<target>/`; `corpus/` is cargo-fuzz's own, ignored), written by
+//! `cargo test --release --manifest-path tests/fuzz/Cargo.toml -- --ignored write_seed_corpus`;
+//! the test `seed_corpus_is_committed` checks the files match.
 
 use paragyro_firmware::drivers::ads131m08::{FRAME_BYTES, Frame};
 
@@ -112,6 +117,53 @@ fn record_seed() -> Vec<u8> {
     t.into_bytes()
 }
 
+/// Seeds of the targets with generated seeds (the scenario parser's are the committed
+/// scenarios of `host-sim/scenarios/`).
+fn seeds(target: &str) -> Vec<Vec<u8>> {
+    match target {
+        "record_reader" => vec![record_seed()],
+        "ads131m08_frame" => frame_seeds(),
+        "estimator_step" => step_seeds(),
+        _ => Vec::new(),
+    }
+}
+
+const SEEDED: [&str; 3] = ["record_reader", "ads131m08_frame", "estimator_step"];
+
+fn corpus_dir(target: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("seeds")
+        .join(target)
+}
+
+#[test]
+#[ignore = "writes the committed seed corpus (run by hand after changing a seed)"]
+fn write_seed_corpus() {
+    for t in SEEDED {
+        let dir = corpus_dir(t);
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for (i, s) in seeds(t).iter().enumerate() {
+            std::fs::write(dir.join(format!("seed-{i:02}")), s).unwrap();
+        }
+    }
+}
+
+#[test]
+fn seed_corpus_is_committed() {
+    for t in SEEDED {
+        for (i, s) in seeds(t).iter().enumerate() {
+            let f = corpus_dir(t).join(format!("seed-{i:02}"));
+            let got = std::fs::read(&f).unwrap_or_default();
+            assert!(
+                &got == s,
+                "{} differs from its seed: run the ignored test write_seed_corpus",
+                f.display()
+            );
+        }
+    }
+}
+
 #[test]
 fn record_reader_corpus() {
     let rec = record_seed();
@@ -151,8 +203,7 @@ fn scenario_parser_corpus() {
     run(paragyro_fuzz::scenario_parser, &seeds, 6_000, 2);
 }
 
-#[test]
-fn ads131m08_frame_corpus() {
+fn frame_seeds() -> Vec<Vec<u8>> {
     let mut rng = Rng(3);
     let mut seeds = vec![Frame::default().encode().to_vec()];
     for _ in 0..16 {
@@ -164,12 +215,17 @@ fn ads131m08_frame_corpus() {
         }
         seeds.push(b.to_vec());
     }
+    seeds
+}
+
+#[test]
+fn ads131m08_frame_corpus() {
+    let mut seeds = frame_seeds();
     seeds.extend(regressions("ads131m08_frame"));
     run(paragyro_fuzz::ads131m08_frame, &seeds, 200_000, 4);
 }
 
-#[test]
-fn estimator_step_corpus() {
+fn step_seeds() -> Vec<Vec<u8>> {
     let mut rng = Rng(5);
     let mut seeds: Vec<Vec<u8>> = Vec::new();
     for _ in 0..8 {
@@ -180,6 +236,12 @@ fn estimator_step_corpus() {
         }
         seeds.push(v);
     }
+    seeds
+}
+
+#[test]
+fn estimator_step_corpus() {
+    let mut seeds = step_seeds();
     seeds.extend(regressions("estimator_step"));
     run(paragyro_fuzz::estimator_step, &seeds, 400, 6);
 }

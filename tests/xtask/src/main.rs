@@ -11,13 +11,19 @@
 //! * `cargo xtask test --no-install` — run the tests as the machine is (the QEMU test then
 //!   fails with a message naming what is missing, or is skipped with `PARAGYRO_SKIP_QEMU=1`).
 //! * `cargo xtask setup` — only install.
+//! * `cargo xtask fuzz [--secs N] [TARGET ...]` — the bounded libFuzzer run of `tests/fuzz`
+//!   (module [`fuzz`]); `cargo xtask test` runs it after the tests, 20 s per target
+//!   (`PARAGYRO_FUZZ_SECS` sets another length, `PARAGYRO_SKIP_FUZZ=1` skips it).
 //!
 //! `qemu-system-arm` comes from Debian's packages (`apt-get`, as root: CI and these
 //! machines run as root); elsewhere the message says what to install by hand. The
 //! firmware-in-the-loop test (tests/tests/fil.rs) needs QEMU too, and a C compiler (`cc`)
 //! for its instruction-count plugin: Rust's host linking needs `cc` anyway, so it is only
-//! checked (and installed with `gcc` from Debian's packages if missing, as root).
+//! checked (and installed with `gcc` from Debian's packages if missing, as root). libFuzzer
+//! is C++: `c++` is checked the same way (Debian's `g++`).
 #![forbid(unsafe_code)]
+
+mod fuzz;
 
 use std::env;
 use std::process::{Command, ExitCode, Stdio};
@@ -34,6 +40,7 @@ fn main() -> ExitCode {
     let task = args.remove(0);
     let result = match task.as_str() {
         "setup" => setup(),
+        "fuzz" => fuzz::fuzz(&args),
         "test" => {
             let install = !take_flag(&mut args, "--no-install");
             (if install { setup() } else { Ok(()) }).and_then(|()| test(&args))
@@ -56,8 +63,9 @@ fn main() -> ExitCode {
 fn usage() -> &'static str {
     "usage: cargo xtask <task>\n\
      \x20 test [--no-install] [CARGO TEST ARGS]   install what the tests need, then `cargo test --workspace`\n\
-     \x20                                         and the fuzz corpus run (tests/fuzz)\n\
-     \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print)"
+     \x20                                         and the bounded libFuzzer run (tests/fuzz)\n\
+     \x20 fuzz [--secs N] [TARGET ...]            the libFuzzer run alone (N s per target, default 20)\n\
+     \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print, cc, c++)"
 }
 
 fn take_flag(args: &mut Vec<String>, flag: &str) -> bool {
@@ -117,6 +125,20 @@ fn setup() -> Result<(), String> {
         return Err("a C compiler (`cc`) is missing: install gcc".into());
     }
 
+    if found("c++") {
+        say("c++: installed (libFuzzer, `cargo xtask fuzz`)");
+    } else if is_root() && found("apt-get") {
+        say("c++: installing it (apt-get install g++)");
+        run("apt-get", &["update", "-qq"])?;
+        run_env(
+            "apt-get",
+            &["install", "-y", "-qq", "--no-install-recommends", "g++"],
+            &[("DEBIAN_FRONTEND", "noninteractive")],
+        )?;
+    } else {
+        return Err("a C++ compiler (`c++`, for libFuzzer) is missing: install g++".into());
+    }
+
     if found("defmt-print") {
         say("defmt-print: installed");
     } else {
@@ -135,24 +157,17 @@ fn test(args: &[String]) -> Result<(), String> {
     let refs: Vec<&str> = all.iter().map(String::as_str).collect();
     say(&format!("cargo {}", refs.join(" ")));
     run(&cargo(), &refs)?;
-    // the fuzz harnesses over their corpus (tests/fuzz is its own workspace; bounded,
-    // stable, no libFuzzer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
+    // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
+    // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
     if args.is_empty() && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let manifest = root.join("tests/fuzz/Cargo.toml");
-        let target = root.join("target/fuzz");
-        let (manifest, target) = (manifest.to_string_lossy(), target.to_string_lossy());
-        let fuzz = [
-            "test",
-            "--release",
-            "--locked",
-            "--manifest-path",
-            &manifest,
-            "--target-dir",
-            &target,
-        ];
-        say(&format!("cargo {}", fuzz.join(" ")));
-        run(&cargo(), &fuzz)?;
+        let secs =
+            match env::var("PARAGYRO_FUZZ_SECS") {
+                Ok(v) => v.parse().ok().filter(|s| *s > 0).ok_or_else(|| {
+                    format!("PARAGYRO_FUZZ_SECS={v}: not a positive whole number")
+                })?,
+                Err(_) => fuzz::DEFAULT_SECS,
+            };
+        fuzz::run_targets(&fuzz::TARGETS, secs)?;
     }
     Ok(())
 }
