@@ -26,6 +26,8 @@ mod step;
 #[cfg(test)]
 mod tests;
 
+pub use state::MAX_CENTRE_DEV;
+
 use crate::config::{Config, ConfigError, ValidConfig};
 use crate::physics::{Physical, physical_from_theta, rate_dps_from_gamma};
 use crate::real::Real;
@@ -114,8 +116,11 @@ impl<T: Real> Estimator<T> {
     /// Commands a new pump centre. `jump = true`: at once, with RLS gating for
     /// `gate_jump_s` and a covariance reset (FINDINGS §3.5); `false`: a raised-cosine
     /// ramp of `retune.ramp_s`.
-    pub fn command_pump_centre(&mut self, pump_hz: f64, jump: bool) {
-        self.state.command_pump_centre(&self.design, pump_hz, jump);
+    ///
+    /// Refused, with nothing changed and `false` returned, unless the frequency is within
+    /// ±10 % ([`MAX_CENTRE_DEV`]) of the configured centre (NaN and ±∞ included).
+    pub fn command_pump_centre(&mut self, pump_hz: f64, jump: bool) -> bool {
+        self.state.command_pump_centre(&self.design, pump_hz, jump)
     }
 
     /// Switches the pump-frequency dither on or off (tapered).
@@ -124,9 +129,10 @@ impl<T: Real> Estimator<T> {
     }
 
     /// Changes the peak pump-frequency dither, Hz (e.g. to keep it a fixed fraction of a
-    /// narrower parametric band). Ignored unless finite, ≥ 0 and below 5 % of the pump.
-    pub fn set_dither_pump_hz(&mut self, pump_hz: f64) {
-        self.state.set_dither_pump_hz(&self.design, pump_hz);
+    /// narrower parametric band). Refused (`false`, nothing changed) unless finite, ≥ 0
+    /// and below 5 % of the pump.
+    pub fn set_dither_pump_hz(&mut self, pump_hz: f64) -> bool {
+        self.state.set_dither_pump_hz(&self.design, pump_hz)
     }
 
     /// Allows or forbids the retune supervisor.

@@ -453,9 +453,14 @@ impl<'a> Iterator for DdsEntries<'a> {
 pub fn apply_control(est: &mut Estimator<f32>, kind: u32, value: f64) -> bool {
     match kind {
         control::DITHER => est.set_dither(value != 0.0),
-        control::DITHER_PUMP_HZ => est.set_dither_pump_hz(value),
+        // a refused value (out of range) changes nothing, as the core documents
+        control::DITHER_PUMP_HZ => {
+            let _ = est.set_dither_pump_hz(value);
+        }
         control::RETUNE => est.set_retune(value != 0.0),
-        control::PUMP_JUMP_HZ => est.command_pump_centre(value, true),
+        control::PUMP_JUMP_HZ => {
+            let _ = est.command_pump_centre(value, true);
+        }
         _ => return false,
     }
     true

@@ -170,9 +170,14 @@ pub fn apply_controls(table: &ReplayTable<'_>, k: usize, app: &mut ReplayApp<'_>
         let est = app.estimator_mut();
         match c.kind {
             control::DITHER => est.set_dither(c.value != 0.0),
-            control::DITHER_PUMP_HZ => est.set_dither_pump_hz(c.value),
+            // a refused value (out of range) changes nothing, as the core documents
+            control::DITHER_PUMP_HZ => {
+                let _ = est.set_dither_pump_hz(c.value);
+            }
             control::RETUNE => est.set_retune(c.value != 0.0),
-            control::PUMP_JUMP_HZ => est.command_pump_centre(c.value, true),
+            control::PUMP_JUMP_HZ => {
+                let _ = est.command_pump_centre(c.value, true);
+            }
             _ => continue,
         }
         n = n.saturating_add(1);

@@ -19,6 +19,14 @@ use crate::retune::{Supervisor, SupervisorSettings};
 use crate::rls::{Rls, RlsSettings};
 use crate::rows::{Envelopes, Known, NominalConsts, RowBuilder, RowSet};
 
+/// A commanded pump centre is accepted within this fraction of the reference (the
+/// configured centre, ω_ref): ±10 %, far beyond any device of the model's tolerances
+/// (the sense resonance of a ±10 % device moves by ±5 %), and where the scheduler's
+/// deviation form still keeps `f32` precision. A fuzzed 1.3e181 Hz centre had been
+/// accepted and made a later dither command produce a NaN pump (regression
+/// `tests/fuzz/regressions/estimator_step/nan-pump-1`).
+pub const MAX_CENTRE_DEV: f64 = 0.1;
+
 /// One replica channel per known signal: ω − ω_ref, ω² − ω_ref², s − 1, ãx, ãy.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Replicas<T> {
@@ -236,11 +244,12 @@ impl<T: Real> State<T> {
     }
 
     /// Commands a new pump centre (see [`super::Estimator::command_pump_centre`]).
-    pub fn command_pump_centre(&mut self, d: &Design<T>, pump_hz: f64, jump: bool) {
-        if !(pump_hz.is_finite() && pump_hz > 0.0) {
-            return;
-        }
+    pub fn command_pump_centre(&mut self, d: &Design<T>, pump_hz: f64, jump: bool) -> bool {
         let dev = pump_hz / (2.0 * d.units.f0_hz) - d.units.om_ref;
+        // `!(… <= …)` also refuses NaN and ±∞
+        if !(pump_hz > 0.0 && dev.abs() <= MAX_CENTRE_DEV * d.units.om_ref) {
+            return false;
+        }
         if jump {
             self.sched.jump(dev);
             self.jump_gate_until = self.k + d.watch.gate_jump;
@@ -259,19 +268,22 @@ impl<T: Real> State<T> {
             let len = libm::round(d.cfg.retune.ramp_s * d.cfg.fs_hz).max(1.0) as u64;
             self.sched.ramp_to(dev, self.k, len);
         }
+        true
     }
 
     /// Changes the peak pump-frequency dither (see
     /// [`super::Estimator::set_dither_pump_hz`]).
-    pub fn set_dither_pump_hz(&mut self, d: &Design<T>, pump_hz: f64) {
+    pub fn set_dither_pump_hz(&mut self, d: &Design<T>, pump_hz: f64) -> bool {
         let centre_hz = d.units.pump_hz_of(self.sched.centre());
-        if pump_hz.is_finite() && pump_hz >= 0.0 && pump_hz < 0.05 * centre_hz {
+        let ok = pump_hz.is_finite() && pump_hz >= 0.0 && pump_hz < 0.05 * centre_hz;
+        if ok {
             let amp = pump_hz / (2.0 * d.units.f0_hz);
             self.sched.set_dither_amp(amp);
             self.dither_rms = amp / core::f64::consts::SQRT_2;
             let v = d.cfg.monitor.excitation_min_fraction * self.dither_rms;
             self.exc_var_min = T::from_f64(v * v);
         }
+        ok
     }
 
     /// The current estimate θ̂1 (8), θ̂2 (6): θ_nom plus the scaled deviation.

@@ -190,6 +190,45 @@ fn jump_gates_and_resets() {
     assert!((est.pump_centre_hz() - 22000.0).abs() < 1e-6);
 }
 
+#[test]
+fn pump_commands_out_of_range_are_refused() {
+    let mut est = Config::table2().build::<f32>().unwrap();
+    let centre = est.pump_centre_hz();
+    // the fuzzed sequence of regression nan-pump-1, reduced: an absurd centre, then a
+    // dither "below 5 % of it"; both used to be accepted and the pump became NaN
+    for bad in [
+        1.3e181,
+        -1.0,
+        0.0,
+        f64::NAN,
+        f64::INFINITY,
+        centre * 1.11,
+        centre * 0.89,
+    ] {
+        assert!(!est.command_pump_centre(bad, true), "{bad} accepted");
+        assert!(!est.command_pump_centre(bad, false), "{bad} accepted");
+    }
+    assert!(!est.set_dither_pump_hz(3.9e160));
+    assert!(!est.set_dither_pump_hz(f64::NAN));
+    assert_eq!(est.pump_centre_hz(), centre);
+    assert_eq!(est.counters().jumps, 0);
+    let mut pump = est.initial_pump_hz();
+    for k in 0..50 {
+        let o = est.step(&sample(k, pump));
+        assert!(
+            o.pump_hz_next.is_finite(),
+            "tick {k}: pump {}",
+            o.pump_hz_next
+        );
+        pump = o.pump_hz_next;
+    }
+    // within ±10 %: accepted
+    assert!(est.command_pump_centre(centre * 1.09, false));
+    assert!(est.command_pump_centre(centre * 0.91, true));
+    assert!(est.set_dither_pump_hz(10.0));
+    assert_eq!(est.counters().jumps, 1);
+}
+
 fn sample_f64(k: u64, pump_hz: f64) -> Sample<f64> {
     let s = sample(k, pump_hz);
     let c = |z: Cplx<f32>| Cplx::new(z.re as f64, z.im as f64);

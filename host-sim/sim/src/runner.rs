@@ -309,12 +309,22 @@ pub fn closed_loop_hooked<T: Real>(
             match e.kind {
                 EventKind::PumpJump { .. } => {
                     if let Some(c) = sc.pump_jump_centre_hz(&e) {
-                        est.command_pump_centre(c, true);
+                        anyhow::ensure!(
+                            est.command_pump_centre(c, true),
+                            "t = {} s: the core refused the pump jump to {c} Hz (more than \
+                             ±10 % from its configured centre)",
+                            e.t_s
+                        );
                     }
                 }
                 EventKind::Dither { enabled, pump_hz } => {
                     if let Some(a) = pump_hz {
-                        est.set_dither_pump_hz(a);
+                        anyhow::ensure!(
+                            est.set_dither_pump_hz(a),
+                            "t = {} s: the core refused the dither of {a} Hz (not in [0, 5 % \
+                             of the pump))",
+                            e.t_s
+                        );
                     }
                     est.set_dither(enabled);
                 }
