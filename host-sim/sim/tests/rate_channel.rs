@@ -14,13 +14,14 @@ fn opts(seed: u64) -> Options {
     }
 }
 
-/// A 100 °/s step: the fast rate is within 2 % of the step from 25 ms on (the 1 %
-/// target is not met: 1.24 % at seed 1, the channel's own dither-rate error), no reset,
-/// the slow θ stay within a few σ of their steady-state scatter.
+/// A 100 °/s step: the fast rate is within 1 % of the step from 25 ms on (issue 10's
+/// target; 0.58 % at seed 1 since the wide filter's curvature correction, 1.24 % before
+/// it, when the channel's own 0.65 °/s tone at the pump dither took most of the margin),
+/// no reset, the slow θ stay within a few σ of their steady-state scatter.
 #[test]
 fn step_response() {
     let (r, tr) = rate_response::step(&opts(1)).unwrap();
-    assert!(r.max_err_after_25ms_pct < 2.0, "{r:?}");
+    assert!(r.max_err_after_25ms_pct < 1.0, "{r:?}");
     assert_eq!(r.resets, 0, "{r:?}");
     assert!(r.slow_theta_max_dev_sigma < 5.0, "{r:?}");
     // and it really moved: 20 ms after the step the fast rate is past 90 % of it, while
@@ -99,13 +100,17 @@ fn rate_flag_drops_while_the_drive_rings_down() {
 }
 
 /// The rate noise (noisy − noise-free run, same seed) against the bound of the same
-/// transfer over three seeds: each within 0.7–2×, and their mean within 0.8–1.5×.
+/// transfer over three seeds: each within 0.7–2×, and their mean within 0.8–1.5×; the
+/// deterministic error below 0.2 °/s rms.
 #[test]
 fn noise_against_crlb_monte_carlo() {
     let mut ratios = Vec::new();
     for seed in [11, 12, 13] {
         let n = rate_response::noise(&opts(seed), Some(78.0)).unwrap();
         assert!((0.7..2.0).contains(&n.ratio_same_g), "{n:?}");
+        // the noise-free run's own error (mostly the tone at the pump dither): 0.087 °/s
+        // rms with the wide filter's curvature correction, 0.51 without it
+        assert!(n.model_err_rms_dps < 0.2, "{n:?}");
         ratios.push(n.ratio_same_g);
     }
     let m = ratios.iter().sum::<f64>() / ratios.len() as f64;
