@@ -111,33 +111,18 @@ fn setup() -> Result<(), String> {
         );
     }
 
-    if found("cc") {
-        say("cc: installed (QEMU plugin of the firmware-in-the-loop test)");
-    } else if is_root() && found("apt-get") {
-        say("cc: installing it (apt-get install gcc)");
-        run("apt-get", &["update", "-qq"])?;
-        run_env(
-            "apt-get",
-            &["install", "-y", "-qq", "--no-install-recommends", "gcc"],
-            &[("DEBIAN_FRONTEND", "noninteractive")],
-        )?;
-    } else {
-        return Err("a C compiler (`cc`) is missing: install gcc".into());
-    }
-
-    if found("c++") {
-        say("c++: installed (libFuzzer, `cargo xtask fuzz`)");
-    } else if is_root() && found("apt-get") {
-        say("c++: installing it (apt-get install g++)");
-        run("apt-get", &["update", "-qq"])?;
-        run_env(
-            "apt-get",
-            &["install", "-y", "-qq", "--no-install-recommends", "g++"],
-            &[("DEBIAN_FRONTEND", "noninteractive")],
-        )?;
-    } else {
-        return Err("a C++ compiler (`c++`, for libFuzzer) is missing: install g++".into());
-    }
+    compiler(
+        "cc",
+        "gcc",
+        "a C compiler",
+        "QEMU plugin of the firmware-in-the-loop test",
+    )?;
+    compiler(
+        "c++",
+        "g++",
+        "a C++ compiler",
+        "libFuzzer, `cargo xtask fuzz`",
+    )?;
 
     if found("defmt-print") {
         say("defmt-print: installed");
@@ -178,6 +163,26 @@ fn cargo() -> String {
 
 fn say(s: &str) {
     println!("xtask: {s}");
+}
+
+/// `cmd` found, or installed from Debian's `package` (as root), or an error naming it.
+fn compiler(cmd: &str, package: &str, what: &str, purpose: &str) -> Result<(), String> {
+    if found(cmd) {
+        say(&format!("{cmd}: installed ({purpose})"));
+        return Ok(());
+    }
+    if !(is_root() && found("apt-get")) {
+        return Err(format!(
+            "{what} (`{cmd}`, for the {purpose}) is missing: install {package}"
+        ));
+    }
+    say(&format!("{cmd}: installing it (apt-get install {package})"));
+    run("apt-get", &["update", "-qq"])?;
+    run_env(
+        "apt-get",
+        &["install", "-y", "-qq", "--no-install-recommends", package],
+        &[("DEBIAN_FRONTEND", "noninteractive")],
+    )
 }
 
 fn found(cmd: &str) -> bool {
