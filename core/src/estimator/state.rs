@@ -99,6 +99,10 @@ pub(crate) struct State<T: Real> {
     /// excitation threshold (both follow `set_dither_pump_hz`).
     pub dither_rms: f64,
     pub exc_var_min: T,
+    /// The excitation meter has said "excited" at least once since start-up: from then
+    /// on a sample without enough excitation is opened without forgetting
+    /// ([`crate::rls::Rls::begin_sample_held`]; step.rs, stage 4).
+    pub excited_once: bool,
     /// Mean pump voltage scale (EWMA over ~1 s).
     pub last_s: T,
     // ---- pump
@@ -145,6 +149,7 @@ impl<T: Real> State<T> {
             settle: SettleTest::default(),
             dither_rms: 0.0,
             exc_var_min: T::ZERO,
+            excited_once: false,
             last_s: T::ONE,
             sched: Scheduler::default(),
             sup: Supervisor::default(),
@@ -186,6 +191,7 @@ impl<T: Real> State<T> {
             settle,
             dither_rms,
             exc_var_min,
+            excited_once,
             last_s,
             sched,
             sup,
@@ -220,6 +226,7 @@ impl<T: Real> State<T> {
             let v = cfg.monitor.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
             T::from_f64(v * v)
         };
+        *excited_once = false;
         *last_s = T::ONE;
         *sched = scheduler(cfg, om_ref, dither_amp);
         *sup = Supervisor::new(supervisor_settings(cfg));

@@ -213,3 +213,71 @@ fn run_to_f64(est: &mut Estimator<f64>, n: u64) -> f64 {
     }
     pump
 }
+
+/// Steps `n` samples from `k0` (the pump fed back); returns (updates whose sample was not
+/// excited after the meter had once said excited, whether it ever said excited; `ever`:
+/// it had before).
+fn run_counting_unexcited(
+    est: &mut Estimator<f32>,
+    (k0, n): (u64, u64),
+    pump: &mut f64,
+    mut ever: bool,
+) -> (u64, bool) {
+    let mut unexcited = 0;
+    for k in k0..k0 + n {
+        let o = est.step(&sample(k, *pump));
+        *pump = o.pump_hz_next;
+        // the latch is read before this sample's excitation counts
+        unexcited += (ever && o.updated && !o.health.excitation_ok) as u64;
+        ever |= o.health.excitation_ok;
+    }
+    (unexcited, ever)
+}
+
+#[test]
+fn forgetting_is_held_only_once_excitation_is_lost() {
+    let mut est = Config::table2().build::<f32>().unwrap();
+    let mut pump = est.initial_pump_hz();
+    // start-up: gated, then updates before the dither (1 s) and the meter's rise: the
+    // RLS forgets as before, nothing is held
+    let (unexcited, ever) = run_counting_unexcited(&mut est, (0, 2000), &mut pump, false);
+    assert!(ever && est.health().excitation_ok);
+    assert_eq!(unexcited, 0);
+    let (s1, s2) = est.rls_stats();
+    assert_eq!((s1.forgetting_held, s2.forgetting_held), (0, 0));
+    // the dither switched off: once the meter falls, every update is held (no forgetting)
+    est.set_dither(false);
+    let (unexcited, _) = run_counting_unexcited(&mut est, (2000, 2000), &mut pump, true);
+    let (s1, s2) = est.rls_stats();
+    assert!(!est.health().excitation_ok);
+    assert!(unexcited > 1500, "{unexcited} unexcited updates");
+    assert_eq!(
+        (s1.forgetting_held, s2.forgetting_held),
+        (unexcited, unexcited)
+    );
+    // and on again: held until the meter has risen (the taper and its 0.5 s EWMA),
+    // then forgetting resumes
+    est.set_dither(true);
+    let (rising, _) = run_counting_unexcited(&mut est, (4000, 1000), &mut pump, true);
+    assert!(est.health().excitation_ok);
+    assert!(
+        rising < 250,
+        "{rising} updates held after the dither came back"
+    );
+    assert_eq!(est.rls_stats().0.forgetting_held, unexcited + rising);
+}
+
+#[test]
+fn a_device_never_excited_keeps_forgetting() {
+    // dither configured off: the meter never says excited, the RLS forgets (with the
+    // trace bound) as it always did
+    let mut cfg = Config::table2();
+    cfg.dither.enabled = false;
+    let mut est = cfg.build::<f32>().unwrap();
+    let mut pump = est.initial_pump_hz();
+    let (_, ever) = run_counting_unexcited(&mut est, (0, 3000), &mut pump, false);
+    assert!(!ever);
+    let (s1, s2) = est.rls_stats();
+    assert!(s1.updates > 0 && s2.updates > 0);
+    assert_eq!((s1.forgetting_held, s2.forgetting_held), (0, 0));
+}
