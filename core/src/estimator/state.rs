@@ -99,9 +99,9 @@ pub(crate) struct State<T: Real> {
     /// excitation threshold (both follow `set_dither_pump_hz`).
     pub dither_rms: f64,
     pub exc_var_min: T,
-    /// The excitation meter has said "excited" at least once since start-up: from then
-    /// on a sample without enough excitation is opened without forgetting
-    /// ([`crate::rls::Rls::begin_sample_held`]; step.rs, stage 4).
+    /// The excitation meter has said "excited" since start-up and the last covariance
+    /// reset: from then on a sample without enough excitation is opened without
+    /// forgetting ([`crate::rls::Rls::begin_sample_held`]; step.rs, stage 4).
     pub excited_once: bool,
     /// Mean pump voltage scale (EWMA over ~1 s).
     pub last_s: T,
@@ -336,11 +336,14 @@ impl<T: Real> State<T> {
 
     /// After a covariance reset the converged trace of the old regime means nothing:
     /// the bound is lifted to its start-up value and learned again at the next settle.
+    /// Nor is there an excited memory left to hold: until the meter sees the dither
+    /// again the RLS forgets as at start-up (`excited_once` cleared).
     pub fn lift_trace_bound(&mut self, d: &Design<T>) {
         // in T from the design (no soft-f64 on the reset tick)
         self.rls1.set_trace_max(d.fit.trace_max1);
         self.rls2.set_trace_max(d.fit.trace_max2);
         self.bound_learned = false;
+        self.excited_once = false;
     }
 }
 

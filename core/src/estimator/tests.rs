@@ -214,57 +214,87 @@ fn run_to_f64(est: &mut Estimator<f64>, n: u64) -> f64 {
     pump
 }
 
-/// Steps `n` samples from `k0` (the pump fed back); returns (updates whose sample was not
-/// excited after the meter had once said excited, whether it ever said excited; `ever`:
-/// it had before).
-fn run_counting_unexcited(
-    est: &mut Estimator<f32>,
-    (k0, n): (u64, u64),
-    pump: &mut f64,
-    mut ever: bool,
-) -> (u64, bool) {
-    let mut unexcited = 0;
-    for k in k0..k0 + n {
-        let o = est.step(&sample(k, *pump));
-        *pump = o.pump_hz_next;
-        // the latch is read before this sample's excitation counts
-        unexcited += (ever && o.updated && !o.health.excitation_ok) as u64;
-        ever |= o.health.excitation_ok;
+/// The rule of step.rs, stage 4, replayed from the outputs: `latch` = the meter said
+/// "excited" since start-up and the last covariance reset.
+#[derive(Default)]
+struct HoldModel {
+    latch: bool,
+    /// Updates the rule holds (no forgetting).
+    held: u64,
+    /// Covariance resets seen (change alarms or a jump).
+    resets: u64,
+}
+
+impl HoldModel {
+    /// Steps `n` samples from `k0` (the pump fed back), replaying the rule.
+    fn run(&mut self, est: &mut Estimator<f32>, (k0, n): (u64, u64), pump: &mut f64) {
+        for k in k0..k0 + n {
+            let o = est.step(&sample(k, *pump));
+            *pump = o.pump_hz_next;
+            // the latch is read before this sample's excitation counts
+            self.held += (self.latch && o.updated && !o.health.excitation_ok) as u64;
+            self.latch |= o.health.excitation_ok;
+            if o.events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
+                self.latch = false;
+                self.resets += 1;
+            }
+        }
     }
-    (unexcited, ever)
+
+    fn check(&self, est: &Estimator<f32>) {
+        let (s1, s2) = est.rls_stats();
+        assert_eq!(
+            (s1.forgetting_held, s2.forgetting_held),
+            (self.held, self.held)
+        );
+    }
 }
 
 #[test]
 fn forgetting_is_held_only_once_excitation_is_lost() {
-    let mut est = Config::table2().build::<f32>().unwrap();
+    // the synthetic samples are no gyro: the change detector would fire on them all the
+    // time, so it is switched off here (the commanded jump below still resets)
+    let mut cfg = Config::table2();
+    cfg.monitor.change_threshold = 1e30;
+    let mut est = cfg.build::<f32>().unwrap();
     let mut pump = est.initial_pump_hz();
+    let mut m = HoldModel::default();
     // start-up: gated, then updates before the dither (1 s) and the meter's rise: the
     // RLS forgets as before, nothing is held
-    let (unexcited, ever) = run_counting_unexcited(&mut est, (0, 2000), &mut pump, false);
-    assert!(ever && est.health().excitation_ok);
-    assert_eq!(unexcited, 0);
-    let (s1, s2) = est.rls_stats();
-    assert_eq!((s1.forgetting_held, s2.forgetting_held), (0, 0));
-    // the dither switched off: once the meter falls, every update is held (no forgetting)
-    est.set_dither(false);
-    let (unexcited, _) = run_counting_unexcited(&mut est, (2000, 2000), &mut pump, true);
-    let (s1, s2) = est.rls_stats();
-    assert!(!est.health().excitation_ok);
-    assert!(unexcited > 1500, "{unexcited} unexcited updates");
-    assert_eq!(
-        (s1.forgetting_held, s2.forgetting_held),
-        (unexcited, unexcited)
-    );
-    // and on again: held until the meter has risen (the taper and its 0.5 s EWMA),
-    // then forgetting resumes
-    est.set_dither(true);
-    let (rising, _) = run_counting_unexcited(&mut est, (4000, 1000), &mut pump, true);
+    m.run(&mut est, (0, 2000), &mut pump);
     assert!(est.health().excitation_ok);
+    assert_eq!(m.held, 0);
+    m.check(&est);
+    // the dither switched off: once the meter falls, the updates are held
+    est.set_dither(false);
+    m.run(&mut est, (2000, 2000), &mut pump);
+    assert!(!est.health().excitation_ok);
+    std::println!("dither off: {} updates held, {} resets", m.held, m.resets);
+    assert_eq!(m.resets, 0);
+    assert!(m.held > 1500, "{} updates held", m.held);
+    m.check(&est);
+    // on again: forgetting resumes once the meter has risen
+    est.set_dither(true);
+    m.run(&mut est, (4000, 1000), &mut pump);
+    assert!(est.health().excitation_ok);
+    m.check(&est);
+    // off again, then a covariance reset (a commanded jump): no excited memory is left
+    // to hold, so the RLS forgets as at start-up until the meter sees the dither again
+    est.set_dither(false);
+    m.run(&mut est, (5000, 1000), &mut pump);
+    m.check(&est);
+    let held = m.held;
+    est.command_pump_centre(est.pump_centre_hz(), true);
+    m.latch = false;
+    let u = est.rls_stats().0.updates;
+    m.run(&mut est, (6000, 1500), &mut pump);
     assert!(
-        rising < 250,
-        "{rising} updates held after the dither came back"
+        est.rls_stats().0.updates > u,
+        "the RLS updates after the jump's gate"
     );
-    assert_eq!(est.rls_stats().0.forgetting_held, unexcited + rising);
+    assert!(!est.health().excitation_ok);
+    assert_eq!(m.held, held);
+    m.check(&est);
 }
 
 #[test]
@@ -275,8 +305,9 @@ fn a_device_never_excited_keeps_forgetting() {
     cfg.dither.enabled = false;
     let mut est = cfg.build::<f32>().unwrap();
     let mut pump = est.initial_pump_hz();
-    let (_, ever) = run_counting_unexcited(&mut est, (0, 3000), &mut pump, false);
-    assert!(!ever);
+    let mut m = HoldModel::default();
+    m.run(&mut est, (0, 3000), &mut pump);
+    assert!(!m.latch);
     let (s1, s2) = est.rls_stats();
     assert!(s1.updates > 0 && s2.updates > 0);
     assert_eq!((s1.forgetting_held, s2.forgetting_held), (0, 0));
