@@ -51,7 +51,9 @@ pub struct DitherConfig {
 /// Recursive least squares settings (both axes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RlsConfig {
-    /// Forgetting factor per 500 Hz sample (0.999 ⇔ 2 s memory).
+    /// Forgetting factor per 500 Hz sample (0.999 ⇔ 2 s memory). Applied only while the
+    /// excitation is sufficient (`monitor.excitation_min_fraction`); once the dither has
+    /// been seen, a sample without it is not forgotten over (λ = 1, `rls.rs` "Anti-windup").
     pub forgetting: f64,
     /// Initial covariance, in column-scaled units (relative variance of each θ).
     pub p0: f64,
@@ -92,7 +94,8 @@ pub struct MonitorConfig {
     /// (0 disables; real data always carries noise).
     pub stuck_samples: u32,
     /// Excitation is sufficient when the rms of the filtered pump-frequency deviation
-    /// is at least this fraction of the configured dither's rms.
+    /// is at least this fraction of the configured dither's rms. Below it (after it was
+    /// once reached) the RLS holds its memory instead of forgetting.
     pub excitation_min_fraction: f64,
 }
 

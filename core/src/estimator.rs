@@ -233,6 +233,12 @@ impl<T: Real> Estimator<T> {
 
     // ---- diagnostics
 
+    /// The guard statistics of the two RLS (drive, sense): updates, forgetting skipped
+    /// by the trace bound, samples held without forgetting (no excitation), resets.
+    pub fn rls_stats(&self) -> (crate::rls::RlsStats, crate::rls::RlsStats) {
+        (self.state.rls1.stats(), self.state.rls2.stats())
+    }
+
     /// Traces of the (column-scaled) covariances (drive, sense).
     pub fn traces(&self) -> (f64, f64) {
         (

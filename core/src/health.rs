@@ -11,7 +11,8 @@
 pub struct Health {
     /// This sample's inputs were valid.
     pub inputs_valid: bool,
-    /// The pump-frequency excitation is sufficient for identification.
+    /// The pump-frequency excitation is sufficient for identification. When not (after
+    /// it once was), the RLS opened this sample without forgetting (θ̂ held).
     pub excitation_ok: bool,
     /// Both covariances are finite, positive definite and bounded.
     pub covariance_bounded: bool,

@@ -11,7 +11,9 @@
 //!   level is about the number of rows). Beyond the threshold (FINDINGS §5: 1e3) the
 //!   covariance is reset so the RLS re-identifies quickly after a parameter change.
 //! * **Excitation.** rms of the replica pump-frequency deviation about its running mean:
-//!   steady operation is not persistently exciting (rank 5 of 8), the dither is.
+//!   steady operation is not persistently exciting (rank 5 of 8), the dither is. Below
+//!   the threshold (once it has been above) the RLS does not forget (`rls.rs`,
+//!   "Anti-windup").
 //! * **Settled.** ω̂y² moved less than a relative tolerance over a window.
 
 use crate::real::Real;

@@ -1,5 +1,6 @@
-//! Bierman UD recursive least squares with exponential forgetting, a trace bound
-//! against covariance wind-up, covariance reset and guard statistics.
+//! Bierman UD recursive least squares with exponential forgetting (held while the caller
+//! sees no excitation), a trace bound against covariance wind-up, covariance reset and
+//! guard statistics.
 //!
 //! # Model
 //!
@@ -47,10 +48,31 @@
 //!
 //! Without excitation (steady operation is only rank 5 of 8) forgetting inflates `P`
 //! geometrically, by `1/λ` per sample: 148× in 10 s at λ = 0.999, and an idle `f32`
-//! filter would overflow after a few minutes. [`Rls::begin_sample`] therefore skips
-//! the forgetting step whenever `trace(P) ≥ trace_max` (and whenever `trace(P)/λ`
-//! would not be finite), so `trace(P) ≤ max(trace(P₀), trace_max/λ)` forever.
-//! FINDINGS.md recommends `trace_max` = 10× the converged trace.
+//! filter would overflow after a few minutes. Two rules keep it bounded:
+//!
+//! 1. **Forget only while excited.** The caller opens a sample with
+//!    [`Rls::begin_sample_held`] instead of [`Rls::begin_sample`] when the regression is
+//!    not persistently exciting: λ = 1 for that sample, so `P` is carried over and the
+//!    updates can only shrink it (`P⁺ = P − K s Kᵀ`), and the estimate keeps the whole
+//!    memory it had when the excitation stopped. The estimator does this on every sample
+//!    on which its excitation meter (the variance of the filtered pump-frequency
+//!    deviation, `monitor.excitation_min_fraction` of the dither's) says "not excited",
+//!    once it has said "excited" since start-up and the last covariance reset
+//!    (`estimator/step.rs`). Why: with the trace bound alone, `P` sat at `trace_max` in
+//!    the weakly excited directions, the filter kept a 2 s memory there and θ̂
+//!    random-walked along them: in the 1 h soak with the dither off θ14 (the rate term)
+//!    moved 41 % and the rate drifted 4.6 °/s/h (README, "Soak"); held, every θ stays
+//!    within 2 %. A covariance reset (a change alarm, a commanded jump) ends the hold:
+//!    no excited memory is left to keep, and the filter forgets as at start-up until
+//!    the dither is seen again (holding on after the reset left ω̂y² stuck 4.8e-3 off,
+//!    flagged settled, after an ωy² step with the dither off; README, "Soak").
+//! 2. **Trace bound.** [`Rls::begin_sample`] skips the forgetting step whenever
+//!    `trace(P) ≥ trace_max` (and whenever `trace(P)/λ` would not be finite), so
+//!    `trace(P) ≤ max(trace(P₀), trace_max/λ)` forever. FINDINGS.md recommends
+//!    `trace_max` = 10× the converged trace. It still guards what rule 1 does not see:
+//!    start-up before the dither, a device whose dither is configured off (never
+//!    excited: it forgets as before, bounded by this rule) and directions the dither
+//!    itself excites only weakly.
 //!
 //! # Guards (never panic, never allocate)
 //!
@@ -67,7 +89,8 @@
 //!
 //! Per [`Rls::update`]: about `1.5 N²` multiply-adds for the Bierman step, `N` divisions,
 //! about `22 N` flops for the compensated innovation and `N² + 2N` finiteness checks.
-//! [`Rls::begin_sample`] costs one trace (`N(N+1)/2` multiply-adds) and `N` divisions.
+//! [`Rls::begin_sample`] costs one trace (`N(N+1)/2` multiply-adds) and `N` divisions,
+//! [`Rls::begin_sample_held`] the trace only.
 //!
 //! # Example
 //!
@@ -296,6 +319,9 @@ pub struct RlsStats {
     /// Samples whose forgetting step was skipped by the trace bound (or because
     /// `trace(P)/λ` would overflow).
     pub forgetting_skipped: u64,
+    /// Samples opened by [`Rls::begin_sample_held`]: no forgetting because the caller
+    /// saw too little excitation (λ = 1 for that sample).
+    pub forgetting_held: u64,
     /// Diagonal factors raised to [`D_FLOOR`] (one count per clamped `D_j`).
     pub d_floor_hits: u64,
     /// Calls of [`Rls::reset_covariance`].
@@ -338,6 +364,7 @@ impl<T: Real, const N: usize> Rls<T, N> {
                 updates: 0,
                 skipped_non_finite: 0,
                 forgetting_skipped: 0,
+                forgetting_held: 0,
                 d_floor_hits: 0,
                 resets: 0,
             },
@@ -421,6 +448,20 @@ impl<T: Real, const N: usize> Rls<T, N> {
             self.stats.forgetting_skipped = self.stats.forgetting_skipped.saturating_add(1);
             false
         }
+    }
+
+    /// Opens a sample *without* forgetting (λ = 1 for this sample): `P` is carried over
+    /// unchanged, so the sample's [`update`](Rls::update)s can only shrink it and the
+    /// memory of the past is held. The estimator calls this instead of
+    /// [`begin_sample`](Rls::begin_sample) while its excitation meter says the
+    /// regression is not persistently exciting (module docs, "Anti-windup"). Counted in
+    /// [`RlsStats::forgetting_held`]; the trace is read as by `begin_sample` (same cost,
+    /// [`last_trace`](Rls::last_trace) stays a fresh health reading).
+    pub fn begin_sample_held(&mut self) {
+        if self.settings.forgetting != T::ONE {
+            self.last_trace = self.trace();
+        }
+        self.stats.forgetting_held = self.stats.forgetting_held.saturating_add(1);
     }
 
     /// trace(P) as computed by the last [`begin_sample`](Rls::begin_sample) (or set by a

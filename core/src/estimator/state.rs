@@ -107,6 +107,10 @@ pub(crate) struct State<T: Real> {
     /// excitation threshold (both follow `set_dither_pump_hz`).
     pub dither_rms: f64,
     pub exc_var_min: T,
+    /// The excitation meter has said "excited" since start-up and the last covariance
+    /// reset: from then on a sample without enough excitation is opened without
+    /// forgetting ([`crate::rls::Rls::begin_sample_held`]; step.rs, stage 4).
+    pub excited_once: bool,
     /// Mean pump voltage scale (EWMA over ~1 s).
     pub last_s: T,
     // ---- pump
@@ -153,6 +157,7 @@ impl<T: Real> State<T> {
             settle: SettleTest::default(),
             dither_rms: 0.0,
             exc_var_min: T::ZERO,
+            excited_once: false,
             last_s: T::ONE,
             sched: Scheduler::default(),
             sup: Supervisor::default(),
@@ -194,6 +199,7 @@ impl<T: Real> State<T> {
             settle,
             dither_rms,
             exc_var_min,
+            excited_once,
             last_s,
             sched,
             sup,
@@ -228,6 +234,7 @@ impl<T: Real> State<T> {
             let v = cfg.monitor.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
             T::from_f64(v * v)
         };
+        *excited_once = false;
         *last_s = T::ONE;
         *sched = scheduler(cfg, om_ref, dither_amp);
         *sup = Supervisor::new(supervisor_settings(cfg));
@@ -341,11 +348,14 @@ impl<T: Real> State<T> {
 
     /// After a covariance reset the converged trace of the old regime means nothing:
     /// the bound is lifted to its start-up value and learned again at the next settle.
+    /// Nor is there an excited memory left to hold: until the meter sees the dither
+    /// again the RLS forgets as at start-up (`excited_once` cleared).
     pub fn lift_trace_bound(&mut self, d: &Design<T>) {
         // in T from the design (no soft-f64 on the reset tick)
         self.rls1.set_trace_max(d.fit.trace_max1);
         self.rls2.set_trace_max(d.fit.trace_max2);
         self.bound_learned = false;
+        self.excited_once = false;
     }
 }
 

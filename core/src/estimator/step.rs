@@ -43,6 +43,12 @@ impl<T: Real> State<T> {
             return self.hold_centre(d, events);
         };
         let exc_var = self.known_signals(d, pump_hz, pump_scale, acc);
+        let excited = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
+        // forget only while excited: once the dither has excited the regression, a
+        // sample without enough excitation holds the RLS memory (λ = 1) instead of
+        // letting P grow in the unexcited directions (rls.rs, "Anti-windup")
+        let hold = self.excited_once && !excited;
+        self.excited_once |= excited;
         let proj = Projections::of(&d.rows, &env);
         self.track_rate(d, &env, &proj);
         self.rows
@@ -54,12 +60,12 @@ impl<T: Real> State<T> {
             || self.lin.pending.handover_pending();
         let updated = !gated && good;
         if updated {
-            self.update(d, k, &mut events);
+            self.update(d, k, hold, &mut events);
         }
         let wy2 = self.wy2_fast(d);
         let settled = self.settle(d, k, gated, updated, wy2, &mut events);
         self.maybe_relinearize(d, k, updated, good);
-        let health = self.assess(d, good, gated, settled, exc_var, pump_scale);
+        let health = self.assess(d, good, gated, settled, excited, pump_scale);
         let drive_amp = env.a[0].abs();
         let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
         self.health = health;
@@ -197,13 +203,19 @@ impl<T: Real> State<T> {
 
     /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns
     /// scaled by |θ_design|), then the change detectors on the summed normalised
-    /// innovations; an alarm resets that axis' covariance.
+    /// innovations; an alarm resets that axis' covariance. `hold`: the sample is not
+    /// excited (after the dither has been): opened without forgetting.
     #[inline(always)]
-    fn update(&mut self, d: &Design<T>, k: u64, events: &mut u8) {
+    fn update(&mut self, d: &Design<T>, k: u64, hold: bool, events: &mut u8) {
         let f = &d.fit;
         Counters::bump(&mut self.counters.updates, 1);
-        self.rls1.begin_sample();
-        self.rls2.begin_sample();
+        if hold {
+            self.rls1.begin_sample_held();
+            self.rls2.begin_sample_held();
+        } else {
+            self.rls1.begin_sample();
+            self.rls2.begin_sample();
+        }
         let rows = &self.last_rows;
         let mut sum1 = T::ZERO;
         let mut sum2 = T::ZERO;
@@ -285,7 +297,8 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp
-    /// as of before its tick), and the 1 s mean of the pump scale.
+    /// as of before its tick; `excitation_ok` from the meter, stage 2), and the 1 s mean
+    /// of the pump scale.
     #[inline(always)]
     fn assess(
         &mut self,
@@ -293,10 +306,9 @@ impl<T: Real> State<T> {
         good: bool,
         gated: bool,
         settled: bool,
-        exc_var: T,
+        excitation_ok: bool,
         pump_scale: T,
     ) -> Health {
-        let excitation_ok = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
         let (tr1, tr2) = (self.rls1.last_trace(), self.rls2.last_trace());
         let (lim1, lim2) = (d.fit.lim1, d.fit.lim2);
         let covariance_bounded = tr1.is_finite()

@@ -252,3 +252,102 @@ fn run_to_f64(est: &mut Estimator<f64>, n: u64) -> f64 {
     }
     pump
 }
+
+/// The rule of step.rs, stage 4, replayed from the outputs: `latch` = the meter said
+/// "excited" since start-up and the last covariance reset.
+#[derive(Default)]
+struct HoldModel {
+    latch: bool,
+    /// Updates the rule holds (no forgetting).
+    held: u64,
+    /// Covariance resets seen (change alarms or a jump).
+    resets: u64,
+}
+
+impl HoldModel {
+    /// Steps `n` samples from `k0` (the pump fed back), replaying the rule.
+    fn run(&mut self, est: &mut Estimator<f32>, (k0, n): (u64, u64), pump: &mut f64) {
+        for k in k0..k0 + n {
+            let o = est.step(&sample(k, *pump));
+            *pump = o.pump_hz_next;
+            // the latch is read before this sample's excitation counts
+            self.held += (self.latch && o.updated && !o.health.excitation_ok) as u64;
+            self.latch |= o.health.excitation_ok;
+            if o.events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
+                self.latch = false;
+                self.resets += 1;
+            }
+        }
+    }
+
+    fn check(&self, est: &Estimator<f32>) {
+        let (s1, s2) = est.rls_stats();
+        assert_eq!(
+            (s1.forgetting_held, s2.forgetting_held),
+            (self.held, self.held)
+        );
+    }
+}
+
+#[test]
+fn forgetting_is_held_only_once_excitation_is_lost() {
+    // the synthetic samples are no gyro: the change detector would fire on them all the
+    // time, so it is switched off here (the commanded jump below still resets)
+    let mut cfg = Config::table2();
+    cfg.monitor.change_threshold = 1e30;
+    let mut est = cfg.build::<f32>().unwrap();
+    let mut pump = est.initial_pump_hz();
+    let mut m = HoldModel::default();
+    // start-up: gated, then updates before the dither (1 s) and the meter's rise: the
+    // RLS forgets as before, nothing is held
+    m.run(&mut est, (0, 2000), &mut pump);
+    assert!(est.health().excitation_ok);
+    assert_eq!(m.held, 0);
+    m.check(&est);
+    // the dither switched off: once the meter falls, the updates are held
+    est.set_dither(false);
+    m.run(&mut est, (2000, 2000), &mut pump);
+    assert!(!est.health().excitation_ok);
+    std::println!("dither off: {} updates held, {} resets", m.held, m.resets);
+    assert_eq!(m.resets, 0);
+    assert!(m.held > 1500, "{} updates held", m.held);
+    m.check(&est);
+    // on again: forgetting resumes once the meter has risen
+    est.set_dither(true);
+    m.run(&mut est, (4000, 1000), &mut pump);
+    assert!(est.health().excitation_ok);
+    m.check(&est);
+    // off again, then a covariance reset (a commanded jump): no excited memory is left
+    // to hold, so the RLS forgets as at start-up until the meter sees the dither again
+    est.set_dither(false);
+    m.run(&mut est, (5000, 1000), &mut pump);
+    m.check(&est);
+    let held = m.held;
+    est.command_pump_centre(est.pump_centre_hz(), true);
+    m.latch = false;
+    let u = est.rls_stats().0.updates;
+    m.run(&mut est, (6000, 1500), &mut pump);
+    assert!(
+        est.rls_stats().0.updates > u,
+        "the RLS updates after the jump's gate"
+    );
+    assert!(!est.health().excitation_ok);
+    assert_eq!(m.held, held);
+    m.check(&est);
+}
+
+#[test]
+fn a_device_never_excited_keeps_forgetting() {
+    // dither configured off: the meter never says excited, the RLS forgets (with the
+    // trace bound) as it always did
+    let mut cfg = Config::table2();
+    cfg.dither.enabled = false;
+    let mut est = cfg.build::<f32>().unwrap();
+    let mut pump = est.initial_pump_hz();
+    let mut m = HoldModel::default();
+    m.run(&mut est, (0, 3000), &mut pump);
+    assert!(!m.latch);
+    let (s1, s2) = est.rls_stats();
+    assert!(s1.updates > 0 && s2.updates > 0);
+    assert_eq!((s1.forgetting_held, s2.forgetting_held), (0, 0));
+}
