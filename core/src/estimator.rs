@@ -118,7 +118,7 @@ impl<T: Real> Estimator<T> {
     /// ramp of `retune.ramp_s`.
     ///
     /// Refused, with nothing changed and `false` returned, unless the frequency is within
-    /// ±10 % ([`MAX_CENTRE_DEV`]) of the configured centre (NaN and ±∞ included).
+    /// ±50 % ([`MAX_CENTRE_DEV`]) of the configured centre (NaN and ±∞ included).
     pub fn command_pump_centre(&mut self, pump_hz: f64, jump: bool) -> bool {
         self.state.command_pump_centre(&self.design, pump_hz, jump)
     }

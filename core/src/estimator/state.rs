@@ -20,12 +20,13 @@ use crate::rls::{Rls, RlsSettings};
 use crate::rows::{Envelopes, Known, NominalConsts, RowBuilder, RowSet};
 
 /// A commanded pump centre is accepted within this fraction of the reference (the
-/// configured centre, ω_ref): ±10 %, far beyond any device of the model's tolerances
-/// (the sense resonance of a ±10 % device moves by ±5 %), and where the scheduler's
-/// deviation form still keeps `f32` precision. A fuzzed 1.3e181 Hz centre had been
+/// configured centre, ω_ref): ±50 %, a sense resonance of 0.25–2.25× the design's ωy²
+/// (the paper's ±50 % parameter switch moves the pump by +22 % / −29 %: `paper-switch`);
+/// the scheduler's deviation form keeps `f32` precision there (≈ 3e-8 of ω_ref, 0.7 mHz
+/// at 21.9 kHz). A fuzzed 1.3e181 Hz centre had been
 /// accepted and made a later dither command produce a NaN pump (regression
 /// `tests/fuzz/regressions/estimator_step/nan-pump-1`).
-pub const MAX_CENTRE_DEV: f64 = 0.1;
+pub const MAX_CENTRE_DEV: f64 = 0.5;
 
 /// One replica channel per known signal: ω − ω_ref, ω² − ω_ref², s − 1, ãx, ãy.
 #[derive(Clone, Copy, Debug)]

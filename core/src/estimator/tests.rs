@@ -202,8 +202,8 @@ fn pump_commands_out_of_range_are_refused() {
         0.0,
         f64::NAN,
         f64::INFINITY,
-        centre * 1.11,
-        centre * 0.89,
+        centre * 1.51,
+        centre * 0.49,
     ] {
         assert!(!est.command_pump_centre(bad, true), "{bad} accepted");
         assert!(!est.command_pump_centre(bad, false), "{bad} accepted");
@@ -222,9 +222,9 @@ fn pump_commands_out_of_range_are_refused() {
         );
         pump = o.pump_hz_next;
     }
-    // within ±10 %: accepted
-    assert!(est.command_pump_centre(centre * 1.09, false));
-    assert!(est.command_pump_centre(centre * 0.91, true));
+    // within ±50 %: accepted
+    assert!(est.command_pump_centre(centre * 1.49, false));
+    assert!(est.command_pump_centre(centre * 0.51, true));
     assert!(est.set_dither_pump_hz(10.0));
     assert_eq!(est.counters().jumps, 1);
 }

@@ -312,7 +312,7 @@ pub fn closed_loop_hooked<T: Real>(
                         anyhow::ensure!(
                             est.command_pump_centre(c, true),
                             "t = {} s: the core refused the pump jump to {c} Hz (more than \
-                             ±10 % from its configured centre)",
+                             ±50 % from its configured centre)",
                             e.t_s
                         );
                     }

@@ -95,7 +95,7 @@ pub fn estimator_step(data: &[u8]) {
                 pump = out.pump_hz_next;
             }
             2 => {
-                // a refused centre (NaN, ±∞, beyond ±10 % of the configured one) changes
+                // a refused centre (NaN, ±∞, beyond ±50 % of the configured one) changes
                 // nothing
                 let before = est.pump_centre_hz();
                 if !est.command_pump_centre(b.f64(), b.u8() & 1 == 1) {
