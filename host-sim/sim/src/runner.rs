@@ -259,6 +259,41 @@ pub trait LoopHooks<T: Real> {
 struct NoHooks;
 impl<T: Real> LoopHooks<T> for NoHooks {}
 
+/// Gives the core one scenario control event; an event the core refuses (a pump centre
+/// beyond its ±50 % or a dither beyond 5 % of the pump) is an error naming its time.
+fn apply_control<T: Real>(
+    sc: &Scenario,
+    est: &mut Estimator<T>,
+    e: &EventSpec,
+) -> anyhow::Result<()> {
+    match e.kind {
+        EventKind::PumpJump { .. } => {
+            if let Some(c) = sc.pump_jump_centre_hz(e) {
+                anyhow::ensure!(
+                    est.command_pump_centre(c, true),
+                    "t = {} s: the core refused the pump jump to {c} Hz (more than ±50 % from \
+                     its configured centre)",
+                    e.t_s
+                );
+            }
+        }
+        EventKind::Dither { enabled, pump_hz } => {
+            if let Some(a) = pump_hz {
+                anyhow::ensure!(
+                    est.set_dither_pump_hz(a),
+                    "t = {} s: the core refused the dither of {a} Hz (not in [0, 5 % of the \
+                     pump))",
+                    e.t_s
+                );
+            }
+            est.set_dither(enabled);
+        }
+        EventKind::Retune { enabled } => est.set_retune(enabled),
+        _ => {}
+    }
+    Ok(())
+}
+
 /// [`closed_loop_with`] with [`LoopHooks`] between its stages (fault injection).
 pub fn closed_loop_hooked<T: Real>(
     sc: &Scenario,
@@ -306,31 +341,7 @@ pub fn closed_loop_hooked<T: Real>(
         let t_next = (k + 1) as f64 / fs;
         while next_ctrl < controls.len() && controls[next_ctrl].t_s <= t_next + 1e-12 {
             let e = controls[next_ctrl];
-            match e.kind {
-                EventKind::PumpJump { .. } => {
-                    if let Some(c) = sc.pump_jump_centre_hz(&e) {
-                        anyhow::ensure!(
-                            est.command_pump_centre(c, true),
-                            "t = {} s: the core refused the pump jump to {c} Hz (more than \
-                             ±50 % from its configured centre)",
-                            e.t_s
-                        );
-                    }
-                }
-                EventKind::Dither { enabled, pump_hz } => {
-                    if let Some(a) = pump_hz {
-                        anyhow::ensure!(
-                            est.set_dither_pump_hz(a),
-                            "t = {} s: the core refused the dither of {a} Hz (not in [0, 5 % \
-                             of the pump))",
-                            e.t_s
-                        );
-                    }
-                    est.set_dither(enabled);
-                }
-                EventKind::Retune { enabled } => est.set_retune(enabled),
-                _ => {}
-            }
+            apply_control(sc, est, &e)?;
             on_control(&e);
             next_ctrl += 1;
         }
