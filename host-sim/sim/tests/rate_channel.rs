@@ -108,7 +108,7 @@ fn noise_against_crlb_monte_carlo() {
     for seed in [11, 12, 13] {
         let n = rate_response::noise(&opts(seed), Some(78.0)).unwrap();
         assert!((0.7..2.0).contains(&n.ratio_same_g), "{n:?}");
-        // the noise-free run's own error (mostly the tone at the pump dither): 0.087 °/s
+        // the noise-free run's own error (mostly the tone at the pump dither): 0.088 °/s
         // rms with the wide filter's curvature correction, 0.51 without it
         assert!(n.model_err_rms_dps < 0.2, "{n:?}");
         ratios.push(n.ratio_same_g);
