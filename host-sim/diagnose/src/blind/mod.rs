@@ -823,56 +823,97 @@ fn markdown(sm: &Summary, s: &[Scored]) -> String {
         "# Blind benchmark of the diagnosis (N = {}, seed {})\n\n| measure | result | target |\n|---|---|---|\n",
         sm.n, sm.seed
     );
-    m.push_str(&format!("| top-1 on single library effects above the detection limit ({} records) | {} | ≥ 90 % |\n", sm.single_above_limit_records, pct(sm.top1_single_above_limit)));
-    m.push_str(&format!(
-        "| `unknown` on out-of-library records ({}) | {} | ≥ 80 % |\n",
-        sm.outside_records,
-        pct(sm.unknown_on_outside)
-    ));
-    m.push_str(&format!(
-        "| `unknown` on out-of-library records above their detection limit ({}) | {} | |\n",
-        sm.outside_above_limit_records,
-        pct(sm.unknown_on_outside_above_limit)
-    ));
-    m.push_str(&format!(
-        "| `unknown` on out-of-library records outside the diagnosis's span ({}) | {} | |\n",
-        sm.outside_span_records,
-        pct(sm.unknown_on_outside_span)
-    ));
-    m.push_str(&format!(
-        "| `unknown` on those above their detection limit ({}) | {} | ≥ 80 % |\n",
-        sm.outside_span_above_limit_records,
-        pct(sm.unknown_on_outside_span_above_limit)
-    ));
-    m.push_str(&format!(
-        "| false attribution on out-of-library records | {} | |\n",
-        pct(sm.false_attribution_on_outside)
-    ));
-    m.push_str(&format!(
-        "| top-1 on single library effects, all sizes (`none` below the limit counts as a miss) | {} | |\n",
-        pct(sm.top1_single_all_sizes)
-    ));
-    m.push_str(&format!(
-        "| false alarms on clean records ({}) | {} | ≤ 10 % |\n",
-        sm.clean_records,
-        pct(sm.false_alarms_on_clean)
-    ));
-    m.push_str(&format!("| median output-error gap closure / oracle closure (single, above limit) | {} | ≥ 80 % |\n", pct(sm.median_closure_over_oracle)));
-    m.push_str(&format!(
-        "| clean devices' parameters within their 1σ ({} parameter values) | {} | 60–75 % |\n",
-        sm.parameter_coverage_samples,
-        pct(sm.parameter_coverage_1sigma)
-    ));
-    m.push_str(&format!(
-        "| two effects: one named / both named ({}) | {} / {} | |\n",
-        sm.double_records,
-        pct(sm.double_one_named),
-        pct(sm.double_both_named)
-    ));
-    m.push_str(&format!(
-        "| median diagnosis time (20 s record) | {:.2} s | |\n",
-        sm.median_diagnosis_seconds.unwrap_or(f64::NAN)
-    ));
+    let n = |label: &str, count: usize| format!("{label} ({count})");
+    let rows: [(String, String, &str); 12] = [
+        (
+            format!(
+                "top-1 on single library effects above the detection limit ({} records)",
+                sm.single_above_limit_records
+            ),
+            pct(sm.top1_single_above_limit),
+            "≥ 90 %",
+        ),
+        (
+            n("`unknown` on out-of-library records", sm.outside_records),
+            pct(sm.unknown_on_outside),
+            "≥ 80 %",
+        ),
+        (
+            n(
+                "`unknown` on out-of-library records above their detection limit",
+                sm.outside_above_limit_records,
+            ),
+            pct(sm.unknown_on_outside_above_limit),
+            "",
+        ),
+        (
+            n(
+                "`unknown` on out-of-library records outside the diagnosis's span",
+                sm.outside_span_records,
+            ),
+            pct(sm.unknown_on_outside_span),
+            "",
+        ),
+        (
+            n(
+                "`unknown` on those above their detection limit",
+                sm.outside_span_above_limit_records,
+            ),
+            pct(sm.unknown_on_outside_span_above_limit),
+            "≥ 80 %",
+        ),
+        (
+            "false attribution on out-of-library records".into(),
+            pct(sm.false_attribution_on_outside),
+            "",
+        ),
+        (
+            "top-1 on single library effects, all sizes (`none` below the limit counts as a miss)"
+                .into(),
+            pct(sm.top1_single_all_sizes),
+            "",
+        ),
+        (
+            n("false alarms on clean records", sm.clean_records),
+            pct(sm.false_alarms_on_clean),
+            "≤ 10 %",
+        ),
+        (
+            "median output-error gap closure / oracle closure (single, above limit)".into(),
+            pct(sm.median_closure_over_oracle),
+            "≥ 80 %",
+        ),
+        (
+            format!(
+                "clean devices' parameters within their 1σ ({} parameter values)",
+                sm.parameter_coverage_samples
+            ),
+            pct(sm.parameter_coverage_1sigma),
+            "60–75 %",
+        ),
+        (
+            n("two effects: one named / both named", sm.double_records),
+            format!(
+                "{} / {}",
+                pct(sm.double_one_named),
+                pct(sm.double_both_named)
+            ),
+            "",
+        ),
+        (
+            "median diagnosis time (20 s record)".into(),
+            format!("{:.2} s", sm.median_diagnosis_seconds.unwrap_or(f64::NAN)),
+            "",
+        ),
+    ];
+    for (label, value, target) in rows {
+        let target = if target.is_empty() {
+            String::new()
+        } else {
+            format!(" {target}")
+        };
+        m.push_str(&format!("| {label} | {value} |{target} |\n"));
+    }
     m.push_str("\n## Detection against size (single library effects)\n\n| size / detection limit | records | named correctly | said none |\n|---|---|---|---|\n");
     for b in &sm.detection_vs_size {
         m.push_str(&format!(
