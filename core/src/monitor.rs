@@ -51,19 +51,18 @@ impl InputCheck {
         let mut c = InputCheck::default();
         let fs = limits.full_scale_um;
         let afs = limits.accel_full_scale_mps2;
+        // one comparison per channel on the common path (`|v| < fs` is false for NaN and
+        // ±∞ as well as at full scale); which fault it is only when one failed it
+        let mut inside = true;
         for v in ch.iter() {
-            if !v.is_finite() {
-                c.non_finite = true;
-            } else if v.abs() >= fs {
-                c.saturated = true;
-            }
+            inside &= v.abs() < fs;
         }
         for v in s.accel_mps2.iter() {
-            if !v.is_finite() {
-                c.non_finite = true;
-            } else if v.abs() >= afs {
-                c.saturated = true;
-            }
+            inside &= v.abs() < afs;
+        }
+        if !inside {
+            c.classify(&ch, fs);
+            c.classify(&s.accel_mps2, afs);
         }
         if !(s.pump_hz.is_finite()
             && s.pump_hz > 0.0
@@ -76,6 +75,19 @@ impl InputCheck {
             c.stuck = true;
         }
         c
+    }
+
+    /// Sets `non_finite` or `saturated` for each channel of `v` that is not finite or at
+    /// or beyond ±`full_scale`.
+    #[inline(never)]
+    fn classify<T: Real, const N: usize>(&mut self, v: &[T; N], full_scale: T) {
+        for v in v.iter() {
+            if !v.is_finite() {
+                self.non_finite = true;
+            } else if v.abs() >= full_scale {
+                self.saturated = true;
+            }
+        }
     }
 }
 

@@ -30,6 +30,8 @@ pub(crate) struct Units<T> {
     pub f0_hz: f64,
     /// The reference ω_ref = pump centre / (2 f0): commands are deviations from it.
     pub om_ref: f64,
+    /// ω_ref in `T` (the known ω of the rows is ω_ref + the filtered deviation).
+    pub om_ref_t: T,
     /// The reference pump frequency 2·f0·ω_ref, Hz.
     pub pump_ref_hz: f64,
     /// 1/(2 f0) in `T` (Hz of pump → ω).
@@ -54,6 +56,7 @@ impl<T: Real> Units<T> {
             om_ref,
             pump_ref_hz: 2.0 * cfg.f0_hz * om_ref,
             inv_2f0: T::from_f64(1.0 / (2.0 * cfg.f0_hz)),
+            om_ref_t: T::from_f64(om_ref),
             two_om_ref: T::from_f64(2.0 * om_ref),
             inv_l0: T::from_f64(1.0 / cfg.l0_um),
             accel_nd: T::from_f64(1.0 / (cfg.l0_um * 1e-6 * omega0 * omega0)),
@@ -134,6 +137,10 @@ pub(crate) struct Fit<T> {
     /// Row weights 1/σ (drive, sense): unit noise per row.
     pub w1: [T; NROWS],
     pub w2: [T; NROWS],
+    /// Column scale times row weight, `sc[j]·w[r]` rounded once from f64 (drive, sense):
+    /// the RLS rows are `row ∘ scw[r]`, one product per element on the tick.
+    pub scw1: [[T; 8]; NROWS],
+    pub scw2: [[T; 6]; NROWS],
     /// `rls.p_reset` in `T`.
     pub p_reset: T,
     /// The covariance-bounded limits `p0·n·1.0001` (n = 8, 6).
@@ -154,15 +161,21 @@ impl<T: Real> Fit<T> {
         let (th1n, th2n) = theta_from_physical(&cfg.nominal);
         let m = &cfg.monitor;
         let hold = samples_at(m.change_hold_s, cfg.fs_hz).max(1);
+        let w1: [f64; NROWS] =
+            core::array::from_fn(|r| 1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz));
+        let w2: [f64; NROWS] =
+            core::array::from_fn(|r| 1.0 / (cfg.row_sigma_sense[r] * cfg.noise_pm_rthz));
         Fit {
+            scw1: core::array::from_fn(|r| {
+                core::array::from_fn(|j| T::from_f64(libm::fabs(th1n[j]) * w1[r]))
+            }),
+            scw2: core::array::from_fn(|r| {
+                core::array::from_fn(|j| T::from_f64(libm::fabs(th2n[j]) * w2[r]))
+            }),
             sc1: core::array::from_fn(|j| T::from_f64(libm::fabs(th1n[j]))),
             sc2: core::array::from_fn(|j| T::from_f64(libm::fabs(th2n[j]))),
-            w1: core::array::from_fn(|r| {
-                T::from_f64(1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz))
-            }),
-            w2: core::array::from_fn(|r| {
-                T::from_f64(1.0 / (cfg.row_sigma_sense[r] * cfg.noise_pm_rthz))
-            }),
+            w1: w1.map(T::from_f64),
+            w2: w2.map(T::from_f64),
             p_reset: T::from_f64(cfg.rls.p_reset),
             lim1: T::from_f64(cfg.rls.p0 * 8.0 * 1.0001),
             lim2: T::from_f64(cfg.rls.p0 * 6.0 * 1.0001),

@@ -104,9 +104,10 @@ pub(crate) struct State<T: Real> {
     pub det2: ChangeDetector<T>,
     pub exc: ExcitationMeter<T>,
     pub settle: SettleTest<T>,
-    /// rms of the configured dither (ω units) and (excitation_min_fraction · rms)², the
-    /// excitation threshold (both follow `set_dither_pump_hz`).
-    pub dither_rms: f64,
+    /// The configured dither is on (its rms > 0), and (excitation_min_fraction · rms)²,
+    /// the excitation threshold (both follow `set_dither_pump_hz`; a bool, not the f64
+    /// rms: the tick compares it without a soft-float call on the chip).
+    pub dithered: bool,
     pub exc_var_min: T,
     /// The excitation meter has said "excited" since start-up and the last covariance
     /// reset: from then on a sample without enough excitation is opened without
@@ -156,7 +157,7 @@ impl<T: Real> State<T> {
             det2: ChangeDetector::default(),
             exc: ExcitationMeter::default(),
             settle: SettleTest::default(),
-            dither_rms: 0.0,
+            dithered: false,
             exc_var_min: T::ZERO,
             excited_once: false,
             last_s: T::ONE,
@@ -198,7 +199,7 @@ impl<T: Real> State<T> {
             det2,
             exc,
             settle,
-            dither_rms,
+            dithered,
             exc_var_min,
             excited_once,
             last_s,
@@ -230,7 +231,7 @@ impl<T: Real> State<T> {
         *det2 = ChangeDetector::new(&d.fit.change);
         *exc = ExcitationMeter::default();
         *settle = SettleTest::default();
-        *dither_rms = dither_amp / core::f64::consts::SQRT_2;
+        *dithered = dither_amp / core::f64::consts::SQRT_2 > 0.0;
         *exc_var_min = {
             let v = cfg.monitor.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
             T::from_f64(v * v)
@@ -287,8 +288,9 @@ impl<T: Real> State<T> {
         if ok {
             let amp = pump_hz / (2.0 * d.units.f0_hz);
             self.sched.set_dither_amp(amp);
-            self.dither_rms = amp / core::f64::consts::SQRT_2;
-            let v = d.cfg.monitor.excitation_min_fraction * self.dither_rms;
+            let rms = amp / core::f64::consts::SQRT_2;
+            self.dithered = rms > 0.0;
+            let v = d.cfg.monitor.excitation_min_fraction * rms;
             self.exc_var_min = T::from_f64(v * v);
         }
         ok

@@ -43,7 +43,7 @@ impl<T: Real> State<T> {
             return self.hold_centre(d, events);
         };
         let exc_var = self.known_signals(d, pump_hz, pump_scale, acc);
-        let excited = self.dither_rms > 0.0 && exc_var >= self.exc_var_min;
+        let excited = self.dithered && exc_var >= self.exc_var_min;
         // forget only while excited: once the dither has excited the regression, a
         // sample without enough excitation holds the RLS memory (λ = 1) instead of
         // letting P grow in the unexcited directions (rls.rs, "Anti-windup")
@@ -160,7 +160,7 @@ impl<T: Real> State<T> {
         let hold = u.staircase;
         let f_dom = rep.dom.update_with(co, dom, hold);
         let known = Known {
-            om: T::from_f64(u.om_ref) + f_dom,
+            om: u.om_ref_t + f_dom,
             dom2: rep.dom2.update_with(co, dom2, hold),
             omd: rep.dom.derivative(co),
             ds: rep.ds.update_with(co, ds, hold),
@@ -220,15 +220,11 @@ impl<T: Real> State<T> {
         let mut sum1 = T::ZERO;
         let mut sum2 = T::ZERO;
         for r in 0..NROWS {
-            let w = f.w1[r];
-            // built by `from_fn`, not zeroed then filled (no memclr on the tick path)
-            let phi: [T; 8] = core::array::from_fn(|j| rows.drive_phi[r][j] * f.sc1[j] * w);
-            let inn = self.rls1.update(&phi, rows.drive_y[r] * w);
-            sum1 += inn.normalized_sq();
-            let w = f.w2[r];
-            let phi: [T; 6] = core::array::from_fn(|j| rows.sense_phi[r][j] * f.sc2[j] * w);
-            let inn = self.rls2.update(&phi, rows.sense_y[r] * w);
-            sum2 += inn.normalized_sq();
+            // φ = row ∘ (column scale · row weight), the products formed at design time
+            let (a, y) = (&rows.drive_phi[r], rows.drive_y[r] * f.w1[r]);
+            sum1 += self.rls1.update_scaled(a, &f.scw1[r], y).normalized_sq();
+            let (a, y) = (&rows.sense_phi[r], rows.sense_y[r] * f.w2[r]);
+            sum2 += self.rls2.update_scaled(a, &f.scw2[r], y).normalized_sq();
         }
         let p = f.p_reset;
         if self.det1.push(&f.change, k, sum1) {
@@ -346,9 +342,15 @@ impl<T: Real> State<T> {
         events: &mut u8,
     ) -> Health {
         let om_ref = d.units.om_ref;
-        let centre_om = om_ref + self.sched.centre();
         let decide = k.is_multiple_of(DECIDE_EVERY);
         let healthy = decide && health.actionable() && k >= self.bad_gate_until;
+        // the centre (f64: soft float on the chip) only where it is read: the supervisor
+        // reads it on a healthy decision tick, never otherwise
+        let centre_om = if healthy {
+            om_ref + self.sched.centre()
+        } else {
+            om_ref
+        };
         let wy2 = if decide { wy2 } else { T::ZERO };
         // the band (three square roots) only when a retune is actually in view
         let band = if decide

@@ -707,12 +707,17 @@ fn settings_validation_names_the_field() {
 }
 
 #[test]
-fn compensated_innovation_beats_naive_f32() {
-    // y − φᵀx where large terms cancel: products exact in f32 (12-bit factors), so
-    // what is measured is the summation error that compensation removes.
+fn innovation_error_is_within_the_summation_bound() {
+    // y − φᵀx summed in index order in f32: the error is within the textbook bound
+    // γ_(N+1)·(|y| + Σ|φᵢxᵢ|), γ_n = nε/(1 − nε), against the exact f64 value (products
+    // of 12-bit factors, exact in f32, and terms that cancel to a small innovation: the
+    // case where the bound is all there is). The estimator's precision case: rls.rs,
+    // "The innovation".
     let mut rng = Rng::new(2024);
-    let (mut worst_comp, mut worst_naive) = (0.0f64, 0.0f64);
-    for _ in 0..200 {
+    let eps = f32::EPSILON as f64 / 2.0;
+    let gamma = 9.0 * eps / (1.0 - 9.0 * eps);
+    let mut worst = 0.0f64;
+    for _ in 0..2000 {
         let mut phi = [0.0f32; 8];
         let mut x = [0.0f32; 8];
         for i in 0..8 {
@@ -723,20 +728,22 @@ fn compensated_innovation_beats_naive_f32() {
         let exact_dot: f64 = phi.iter().zip(&x).map(|(&a, &b)| a as f64 * b as f64).sum();
         let y = (exact_dot + 1e-3 * rng.uni()) as f32;
         let r_ref = y as f64 - exact_dot;
-        let r_comp = residual(y, &phi, &x) as f64;
-        let r_naive = (y - phi.iter().zip(&x).map(|(a, b)| a * b).sum::<f32>()) as f64;
-        worst_comp = worst_comp.max((r_comp - r_ref).abs());
-        worst_naive = worst_naive.max((r_naive - r_ref).abs());
+        let mag = (y as f64).abs()
+            + phi
+                .iter()
+                .zip(&x)
+                .map(|(&a, &b)| (a as f64 * b as f64).abs())
+                .sum::<f64>();
+        let err = (residual(y, &phi, &x) as f64 - r_ref).abs();
+        assert!(
+            err <= gamma * mag,
+            "error {err:e} above the bound {:e}",
+            gamma * mag
+        );
+        worst = worst.max(err / (gamma * mag));
     }
-    std::println!(
-        "innovation abs error: compensated {worst_comp:.2e}, naive f32 {worst_naive:.2e}"
-    );
-    // one f32 rounding of |r| ≲ 1e-3: ≤ ~1e-10
-    assert!(worst_comp < 1e-9, "compensated error {worst_comp:e}");
-    assert!(
-        worst_naive > 100.0 * worst_comp.max(1e-12),
-        "naive {worst_naive:e}"
-    );
+    // the bound is approached, not vacuous: this data does cancel
+    assert!(worst > 1e-3, "worst error / bound {worst:e}");
 }
 
 /// Excite for 20 000 samples (all six directions), then 50 000 samples (100 s at 500 Hz)
