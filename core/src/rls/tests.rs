@@ -583,6 +583,13 @@ fn non_finite_input_leaves_state_untouched() {
         assert_eq!(inn.status, UpdateStatus::NonFiniteInput);
         rejected += 1;
     }
+    // the input is classified after the innovation: with x = 0, ±∞·0 = NaN still flags it
+    let mut zero = rls.clone();
+    assert!(zero.set_estimate([0.0; 4]));
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let inn = zero.update(&[bad, 0.2, -0.3, 0.4], 1.0);
+        assert_eq!(inn.status, UpdateStatus::NonFiniteInput);
+    }
     // finite but overflowing: s = 1 + φᵀPφ = +∞ in f32
     let inn = rls.update(&[1e30, 0.0, 0.0, 0.0], 1.0);
     assert_eq!(inn.status, UpdateStatus::NumericalFault);
