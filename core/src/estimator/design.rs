@@ -28,6 +28,9 @@ pub(crate) const SETTLE_EVERY: u64 = 25;
 pub(crate) struct Units<T> {
     /// f0 (the time unit ω0 = 2π f0), Hz.
     pub f0_hz: f64,
+    /// 2·f0, Hz of pump per unit of ω (stored: `2.0 * f0` at run time is an `f0 + f0`,
+    /// one soft-float addition per tick on the chip).
+    pub two_f0_hz: f64,
     /// The reference ω_ref = pump centre / (2 f0): commands are deviations from it.
     pub om_ref: f64,
     /// ω_ref in `T` (the known ω of the rows is ω_ref + the filtered deviation).
@@ -53,6 +56,7 @@ impl<T: Real> Units<T> {
         let om_ref = om_ref(cfg);
         Units {
             f0_hz: cfg.f0_hz,
+            two_f0_hz: 2.0 * cfg.f0_hz,
             om_ref,
             pump_ref_hz: 2.0 * cfg.f0_hz * om_ref,
             inv_2f0: T::from_f64(1.0 / (2.0 * cfg.f0_hz)),
@@ -67,7 +71,7 @@ impl<T: Real> Units<T> {
     /// The pump frequency, Hz, of an ω deviation from the reference.
     #[inline]
     pub fn pump_hz_of(&self, dev: f64) -> f64 {
-        self.pump_ref_hz + 2.0 * self.f0_hz * dev
+        self.pump_ref_hz + self.two_f0_hz * dev
     }
 }
 

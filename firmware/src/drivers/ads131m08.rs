@@ -612,10 +612,21 @@ impl Frame {
         // the 27 CRC'd bytes through the table in order, a word (three bytes) per loop
         // step; the codes straight from their bytes (no per-word match, no zeroed frame)
         let (words, _) = bytes.as_chunks::<WORD_BYTES>();
-        let mut crc = CRC_SEED;
-        for &[x, y, z] in words.iter().take(FRAME_WORDS_MINUS_ONE) {
-            crc = crc16_ccitt_byte(crc16_ccitt_byte(crc16_ccitt_byte(crc, x), y), z);
+        let (words, _) = words.split_at(FRAME_WORDS_MINUS_ONE);
+        let mut crc = u32::from(CRC_SEED);
+        let step = |crc: u32, b: u8| {
+            (crc << 8)
+                ^ u32::from(
+                    CRC_TABLE
+                        .get(usize::from((crc >> 8) as u8 ^ b))
+                        .copied()
+                        .unwrap_or(0),
+                )
+        };
+        for &[x, y, z] in words {
+            crc = step(step(step(crc, x), y), z);
         }
+        let crc = crc as u16;
         #[rustfmt::skip]
         let [
             r0, r1, _, a0, a1, a2, b0, b1, b2, c0, c1, c2, d0, d1, d2, e0, e1, e2, f0, f1, f2,
