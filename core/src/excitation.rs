@@ -197,6 +197,15 @@ impl<T: Real> Scheduler<T> {
     /// Computes the commanded ω deviation (from ω_ref) for sample `k`, advancing the
     /// dither phase and taper by one sample. Call once per sample, in order.
     pub fn command(&mut self, k: u64) -> f64 {
+        let d = self.command_dither(k);
+        self.centre + d.to_f64()
+    }
+
+    /// [`Scheduler::command`] in its two parts: advances the centre's ramp and the
+    /// dither by one sample and returns the dither's deviation in `T`; the centre is
+    /// [`Scheduler::centre`] (the caller adds them where it needs the sum: the estimator
+    /// in Hz, without a soft-float ω sum on the chip).
+    pub fn command_dither(&mut self, k: u64) -> T {
         if let Some(r) = self.ramp {
             self.centre = r.at_in::<T>(k);
             if r.done(k) {
@@ -226,8 +235,7 @@ impl<T: Real> Scheduler<T> {
             self.dither_z = (T::ONE, T::ZERO);
             self.scale_z = (T::ONE, T::ZERO);
         }
-        let d = d.to_f64();
-        self.centre + d
+        d
     }
 }
 

@@ -21,6 +21,28 @@ use crate::sample::Sample;
 
 pub use crate::sample::N_LOCKIN_CH;
 
+/// `$m!(i)` for every lock-in channel index, written out: the per-sample checks ran as
+/// loops at ≈ 11–13 instructions a channel on the M4F (`opt-level = "z"` keeps loops).
+macro_rules! each_channel {
+    ($m:ident) => {
+        $m!(0);
+        $m!(1);
+        $m!(2);
+        $m!(3);
+        $m!(4);
+        $m!(5);
+        $m!(6);
+        $m!(7);
+        $m!(8);
+        $m!(9);
+        $m!(10);
+        $m!(11);
+        $m!(12);
+        $m!(13);
+    };
+}
+const _: () = assert!(N_LOCKIN_CH == 14, "each_channel! lists 14 channels");
+
 /// Outcome of the input check.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct InputCheck {
@@ -53,22 +75,21 @@ impl InputCheck {
         let afs = limits.accel_full_scale_mps2;
         // one comparison per channel on the common path (`|v| < fs` is false for NaN and
         // ±∞ as well as at full scale); which fault it is only when one failed it
-        let mut inside = true;
-        for v in ch.iter() {
-            inside &= v.abs() < fs;
+        let mut inside = s.accel_mps2[0].abs() < afs && s.accel_mps2[1].abs() < afs;
+        macro_rules! inside {
+            ($i:expr) => {
+                inside &= ch[$i].abs() < fs
+            };
         }
-        for v in s.accel_mps2.iter() {
-            inside &= v.abs() < afs;
-        }
+        each_channel!(inside);
         if !inside {
             c.classify(&ch, fs);
             c.classify(&s.accel_mps2, afs);
         }
-        if !(s.pump_hz.is_finite()
-            && s.pump_hz > 0.0
-            && s.pump_scale.is_finite()
-            && s.pump_scale >= T::ZERO)
-        {
+        // finite and > 0 from the bits (0 < bits < those of +∞: sign clear, not ±0, not
+        // ∞ or NaN), not an f64 comparison (soft float on the chip)
+        let pump_ok = (1..f64::INFINITY.to_bits()).contains(&s.pump_hz.to_bits());
+        if !(pump_ok && s.pump_scale.is_finite() && s.pump_scale >= T::ZERO) {
             c.non_finite = true;
         }
         if !c.non_finite && stuck.push(limits.stuck_samples, &ch) {
@@ -117,17 +138,19 @@ impl<T: Real> StuckDetector<T> {
             return false;
         }
         let mut stuck = false;
-        for i in 0..N_LOCKIN_CH {
-            if ch[i] == self.last[i] {
-                self.repeats[i] = self.repeats[i].saturating_add(1);
-            } else {
-                self.repeats[i] = 0;
-                self.last[i] = ch[i];
-            }
-            if self.repeats[i] >= limit {
-                stuck = true;
-            }
+        macro_rules! push {
+            ($i:expr) => {{
+                let i = $i;
+                if ch[i] == self.last[i] {
+                    self.repeats[i] = self.repeats[i].saturating_add(1);
+                } else {
+                    self.repeats[i] = 0;
+                    self.last[i] = ch[i];
+                }
+                stuck |= self.repeats[i] >= limit;
+            }};
         }
+        each_channel!(push);
         stuck
     }
 }
@@ -500,29 +523,119 @@ mod tests {
 
     #[test]
     fn stuck_detector() {
-        let mut d = StuckDetector::<f32>::default();
-        let mut ch = [0.0f32; N_LOCKIN_CH];
-        for k in 0..100 {
-            for (i, c) in ch.iter_mut().enumerate() {
-                *c = (k * 31 + i) as f32;
-            }
-            assert!(!d.push(5, &ch));
-        }
-        // channel 3 freezes
-        let mut hit = 0;
-        for k in 100..110 {
-            for (i, c) in ch.iter_mut().enumerate() {
-                if i != 3 {
+        // every channel in turn freezes (the checks are written out per channel)
+        for frozen in 0..N_LOCKIN_CH {
+            let mut d = StuckDetector::<f32>::default();
+            let mut ch = [0.0f32; N_LOCKIN_CH];
+            for k in 0..100 {
+                for (i, c) in ch.iter_mut().enumerate() {
                     *c = (k * 31 + i) as f32;
                 }
+                assert!(!d.push(5, &ch));
             }
-            if d.push(5, &ch) {
-                hit = k;
-                break;
+            let mut hit = 0;
+            for k in 100..110 {
+                for (i, c) in ch.iter_mut().enumerate() {
+                    if i != frozen {
+                        *c = (k * 31 + i) as f32;
+                    }
+                }
+                if d.push(5, &ch) {
+                    hit = k;
+                    break;
+                }
+            }
+            assert_eq!(
+                hit, 104,
+                "channel {frozen}: the 5th repeat of the frozen value"
+            );
+            assert!(!StuckDetector::<f32>::default().push(0, &ch));
+        }
+    }
+
+    /// Every lock-in and accelerometer channel is checked (written out per channel), and
+    /// the pump frequency's bit test is `finite && > 0`.
+    #[test]
+    fn input_check_flags_every_channel_and_a_bad_pump() {
+        use crate::complex::Cplx;
+        use crate::sample::Lockin;
+        let limits = InputLimits {
+            full_scale_um: 10.0f32,
+            accel_full_scale_mps2: 100.0,
+            stuck_samples: 0,
+        };
+        let mut stuck = StuckDetector::default();
+        let good = Sample {
+            lockin: Lockin {
+                x0_um: 0.1,
+                x_um: [Cplx::new(1.0, -1.0); 3],
+                y0_um: 0.2,
+                y_um: [Cplx::new(-2.0, 2.0); 3],
+            },
+            accel_mps2: [1.0, -1.0],
+            pump_hz: 21_883.95,
+            pump_scale: 1.0,
+        };
+        assert!(InputCheck::of(&good, &limits, &mut stuck).ok());
+        let set = |s: &mut Sample<f32>, i: usize, v: f32| match i {
+            0 => s.lockin.x0_um = v,
+            7 => s.lockin.y0_um = v,
+            1..=6 => {
+                let z = &mut s.lockin.x_um[(i - 1) / 2];
+                if i % 2 == 1 { z.re = v } else { z.im = v }
+            }
+            _ => {
+                let z = &mut s.lockin.y_um[(i - 8) / 2];
+                if i % 2 == 0 { z.re = v } else { z.im = v }
+            }
+        };
+        for i in 0..N_LOCKIN_CH {
+            for (v, nf, sat) in [
+                (f32::NAN, true, false),
+                (-f32::INFINITY, true, false),
+                (-10.0, false, true),
+            ] {
+                let mut s = good;
+                set(&mut s, i, v);
+                assert_eq!(
+                    s.lockin.channels()[i].to_bits(),
+                    v.to_bits(),
+                    "channel order"
+                );
+                let c = InputCheck::of(&s, &limits, &mut stuck);
+                assert_eq!((c.non_finite, c.saturated), (nf, sat), "channel {i} = {v}");
             }
         }
-        assert_eq!(hit, 104, "the 5th repeat of the frozen value");
-        assert!(!StuckDetector::<f32>::default().push(0, &ch));
+        for i in 0..2 {
+            for (v, nf, sat) in [(f32::NAN, true, false), (100.0, false, true)] {
+                let mut s = good;
+                s.accel_mps2[i] = v;
+                let c = InputCheck::of(&s, &limits, &mut stuck);
+                assert_eq!((c.non_finite, c.saturated), (nf, sat), "accel {i} = {v}");
+            }
+        }
+        for (hz, ok) in [
+            (0.0, false),
+            (-0.0, false),
+            (-1.0, false),
+            (f64::NAN, false),
+            (-f64::NAN, false),
+            (f64::INFINITY, false),
+            (f64::NEG_INFINITY, false),
+            (f64::MIN_POSITIVE / 2.0, true),
+            (f64::MAX, true),
+            (1.0, true),
+        ] {
+            let s = Sample {
+                pump_hz: hz,
+                ..good
+            };
+            assert_eq!(
+                InputCheck::of(&s, &limits, &mut stuck).ok(),
+                ok,
+                "pump {hz}"
+            );
+        }
     }
 
     #[test]

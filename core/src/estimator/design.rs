@@ -31,6 +31,8 @@ pub(crate) struct Units<T> {
     /// 2·f0, Hz of pump per unit of ω (stored: `2.0 * f0` at run time is an `f0 + f0`,
     /// one soft-float addition per tick on the chip).
     pub two_f0_hz: f64,
+    /// 2·f0 in `T` (the dither's Hz).
+    pub two_f0_t: T,
     /// The reference ω_ref = pump centre / (2 f0): commands are deviations from it.
     pub om_ref: f64,
     /// ω_ref in `T` (the known ω of the rows is ω_ref + the filtered deviation).
@@ -57,6 +59,7 @@ impl<T: Real> Units<T> {
         Units {
             f0_hz: cfg.f0_hz,
             two_f0_hz: 2.0 * cfg.f0_hz,
+            two_f0_t: T::from_f64(2.0 * cfg.f0_hz),
             om_ref,
             pump_ref_hz: 2.0 * cfg.f0_hz * om_ref,
             inv_2f0: T::from_f64(1.0 / (2.0 * cfg.f0_hz)),

@@ -117,6 +117,9 @@ pub(crate) struct State<T: Real> {
     pub last_s: T,
     // ---- pump
     pub sched: Scheduler<T>,
+    /// The scheduler's centre (its `f64` bits) and that centre in Hz: converted when it
+    /// moves (a retune ramp), not on every sample (`State::pump_command_hz`).
+    pub centre_hz: (u64, f64),
     pub sup: Supervisor<T>,
     // ---- bookkeeping
     /// Samples processed.
@@ -136,6 +139,9 @@ pub(crate) struct State<T: Real> {
     pub health: Health,
     pub counters: Counters,
 }
+
+/// No centre converted yet (NaN bits that a centre never has, NaN Hz).
+const NO_CENTRE_HZ: (u64, f64) = (u64::MAX, f64::NAN);
 
 impl<T: Real> State<T> {
     /// The placeholder of an estimator that is not designed yet (every field a constant;
@@ -162,6 +168,7 @@ impl<T: Real> State<T> {
             excited_once: false,
             last_s: T::ONE,
             sched: Scheduler::default(),
+            centre_hz: NO_CENTRE_HZ,
             sup: Supervisor::default(),
             k: 0,
             jump_gate_until: 0,
@@ -204,6 +211,7 @@ impl<T: Real> State<T> {
             excited_once,
             last_s,
             sched,
+            centre_hz,
             sup,
             k,
             jump_gate_until,
@@ -239,6 +247,7 @@ impl<T: Real> State<T> {
         *excited_once = false;
         *last_s = T::ONE;
         *sched = scheduler(cfg, om_ref, dither_amp);
+        *centre_hz = NO_CENTRE_HZ;
         *sup = Supervisor::new(supervisor_settings(cfg));
         *k = 0;
         *jump_gate_until = 0;

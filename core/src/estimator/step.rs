@@ -122,9 +122,8 @@ impl<T: Real> State<T> {
             inputs_valid: false,
             ..Health::default()
         };
-        let dev = self.sched.command(self.k);
         StepOutput {
-            pump_hz_next: d.units.pump_hz_of(dev),
+            pump_hz_next: self.pump_command_hz(d),
             pump_scale_next: self.sched.scale_command(),
             health: self.health,
             events,
@@ -393,13 +392,25 @@ impl<T: Real> State<T> {
         health
     }
 
+    /// The pump command for sample `self.k`, Hz: the scheduler's centre, converted to Hz
+    /// only when it moved, plus its dither in `T` (on the chip one soft-float addition
+    /// and one widening per sample, not an ω sum, a product and a sum in `f64`).
+    #[inline(always)]
+    fn pump_command_hz(&mut self, d: &Design<T>) -> f64 {
+        let dither = self.sched.command_dither(self.k);
+        let centre = self.sched.centre();
+        if centre.to_bits() != self.centre_hz.0 {
+            self.centre_hz = (centre.to_bits(), d.units.pump_hz_of(centre));
+        }
+        self.centre_hz.1 + (d.units.two_f0_t * dither).to_f64()
+    }
+
     /// Stage 7: the pump command for the next sample instant.
     #[inline(always)]
     fn command(&mut self, d: &Design<T>, health: Health, events: u8, updated: bool) -> StepOutput {
         self.k += 1;
-        let dev = self.sched.command(self.k);
         StepOutput {
-            pump_hz_next: d.units.pump_hz_of(dev),
+            pump_hz_next: self.pump_command_hz(d),
             pump_scale_next: self.sched.scale_command(),
             health,
             events,
