@@ -586,7 +586,11 @@ mod tests {
             }
             _ => {
                 let z = &mut s.lockin.y_um[(i - 8) / 2];
-                if i % 2 == 0 { z.re = v } else { z.im = v }
+                if i.is_multiple_of(2) {
+                    z.re = v
+                } else {
+                    z.im = v
+                }
             }
         };
         for i in 0..N_LOCKIN_CH {
