@@ -556,8 +556,7 @@ impl<T: Real, const N: usize> Rls<T, N> {
         // Bierman's update, in place. With finite f, v and a finite positive s every
         // α_j = 1 + Σ_{i≤j} f_i v_i lies in [1, s], so the divisions are safe; only an
         // overflow of U could produce a non-finite value, which the O(N) check below
-        // catches on x and D (the state is then restored and the covariance reset).
-        let x_old = self.x;
+        // catches on the new x (the old x is kept and the covariance reset).
         // k starts as v: k[j] must be v[j] when column j is reached, and the inner loop
         // of column j only touches k[i] for i < j
         let mut k = v;
@@ -592,20 +591,23 @@ impl<T: Real, const N: usize> Rls<T, N> {
         unrolled_columns!(bierman_col);
         // `alpha` now equals `s` (same terms, same order); the gain is k/alpha.
         let g = e / alpha;
-        // written out like the columns (a rolled loop on the chip: ~3 instructions of loop
-        // overhead per element)
+        // the new estimate into `k` (x + k·g), kept only if finite; written out like the
+        // columns (a rolled loop on the chip: ~3 instructions of loop overhead per element)
         macro_rules! x_col {
             ($j:expr $(; $($i:expr),*)?) => {
-                self.x[$j] += k[$j] * g
+                k[$j] = self.x[$j] + k[$j] * g
             };
         }
         unrolled_columns!(x_col);
-        if !(all_finite(T::ZERO, &self.x) && all_finite(T::ZERO, &self.d)) {
-            self.x = x_old;
+        // D needs no test: every D_j was multiplied by α_(j−1)/α_j ∈ (0, 1] (the α grow
+        // from 1 by f_j·v_j = D_j f_j² ≥ 0 to the finite s tested above), so it is finite
+        // and positive where it was
+        if !all_finite(T::ZERO, &k) {
             let p0 = self.settings.p0;
             self.reset_covariance(p0);
             return self.reject(UpdateStatus::NumericalFault);
         }
+        self.x = k;
         let floor = T::from_f64(D_FLOOR);
         // `d` is finite here, so a plain comparison catches zero and underflow (in index
         // order, written out; the clamp itself is out of line: it never runs in practice)
