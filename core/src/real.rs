@@ -43,6 +43,10 @@ pub trait Real:
     fn abs(self) -> Self;
     /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
+    /// `self < o` for two values that are `+0.0`, positive or `+∞` (not NaN, not
+    /// negative), compared as integers: their bit patterns order as their values, and
+    /// the chip's float comparison needs a status transfer besides the compare.
+    fn lt_nonneg(self, o: Self) -> bool;
     /// Sine (libm).
     fn sin(self) -> Self;
     /// Cosine (libm).
@@ -175,6 +179,10 @@ impl Real for f32 {
         f32::is_finite(self)
     }
     #[inline]
+    fn lt_nonneg(self, o: Self) -> bool {
+        self.to_bits() < o.to_bits()
+    }
+    #[inline]
     fn sin(self) -> Self {
         libm::sinf(self)
     }
@@ -243,6 +251,10 @@ impl Real for f64 {
         f64::is_finite(self)
     }
     #[inline]
+    fn lt_nonneg(self, o: Self) -> bool {
+        self.to_bits() < o.to_bits()
+    }
+    #[inline]
     fn sin(self) -> Self {
         libm::sin(self)
     }
@@ -270,6 +282,29 @@ impl Real for f64 {
 mod tests {
     extern crate std;
     use super::*;
+
+    #[test]
+    fn lt_nonneg_is_less_than_on_non_negative_values() {
+        let v64 = [
+            0.0,
+            f64::from_bits(1),
+            f64::MIN_POSITIVE,
+            1e-30,
+            1e-30 * (1.0 + f64::EPSILON),
+            0.5,
+            1.0,
+            3.0e38,
+            f64::MAX,
+            f64::INFINITY,
+        ];
+        for &a in &v64 {
+            for &b in &v64 {
+                assert_eq!(a.lt_nonneg(b), a < b, "{a:e} < {b:e} (f64)");
+                let (a, b) = (a as f32, b as f32);
+                assert_eq!(a.lt_nonneg(b), a < b, "{a:e} < {b:e} (f32)");
+            }
+        }
+    }
 
     #[test]
     fn compact_design_trig_rounds_like_libm() {

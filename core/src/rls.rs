@@ -609,11 +609,12 @@ impl<T: Real, const N: usize> Rls<T, N> {
         }
         self.x = k;
         let floor = T::from_f64(D_FLOOR);
-        // `d` is finite here, so a plain comparison catches zero and underflow (in index
-        // order, written out; the clamp itself is out of line: it never runs in practice)
+        // `d` is finite and ≥ +0 here, so a comparison of the bit patterns catches zero
+        // and underflow (in index order, written out; the clamp itself is out of line: it
+        // never runs in practice)
         macro_rules! floor_col {
             ($j:expr $(; $($i:expr),*)?) => {
-                if self.d[$j] < floor {
+                if self.d[$j].lt_nonneg(floor) {
                     self.floor_d($j, floor);
                 }
             };
