@@ -6,9 +6,9 @@
 //!   board runs the same `App` and tick; the stm32f405 board itself has never run) ≤
 //!   [`RAM_BUDGET`] (an STM32G431-class part);
 //! * instructions per tick on the real-board path (the `fil` board, the fake chips
-//!   excluded, exact): the targets [`TICK_MEAN_TARGET`] / [`TICK_MAX_TARGET`] are **not
-//!   met**; CI enforces regression guards at the measured values instead
-//!   ([`TICK_MEAN_GUARD`], [`TICK_MAX_GUARD`]).
+//!   excluded, exact): mean ≤ [`TICK_MEAN_TARGET`], costliest tick ≤ [`TICK_MAX_TARGET`]
+//!   (issue 12's targets, enforced as they are: QEMU's counts are exact, so there is no
+//!   noise to leave room for).
 
 use serde::Serialize;
 
@@ -18,19 +18,12 @@ use crate::Summary;
 pub const FLASH_BUDGET: u64 = 64 * 1024;
 /// Static RAM plus the stack peak, bytes.
 pub const RAM_BUDGET: u64 = 32 * 1024;
-/// The issue's target for the mean instructions per tick (not met).
+/// The mean instructions per tick (`drift-retune` in the loop measured 11 600 when the
+/// target was first met; 14 675 before that work, 17 859 before the first tick work).
 pub const TICK_MEAN_TARGET: f64 = 12_000.0;
-/// The issue's target for the costliest tick (not met).
+/// The costliest tick (measured 14 346, a re-linearisation's swap tick; 17 540 and
+/// 24 364 before).
 pub const TICK_MAX_TARGET: u64 = 15_000;
-/// Regression guard on the mean: `drift-retune` in the loop measured 14 865 (exact) when
-/// the guard was set, with the fast rate channel (13 758 before it was merged, 15 649
-/// before the budgets work, 17 859 before the tick-budget work; the guard on main before
-/// the merge was 15 800); the guard leaves ≈ 1 % for unrelated code-layout changes.
-pub const TICK_MEAN_GUARD: f64 = 15_000.0;
-/// Regression guard on the costliest tick: measured 17 692 (tick 1575 of `drift-retune`)
-/// with the rate channel (16 367 before it was merged, 18 265 before the budgets work,
-/// 24 364 before the tick-budget work; the guard on main before the merge was 18 450).
-pub const TICK_MAX_GUARD: u64 = 17_900;
 
 /// The budgets against an image and a loop summary.
 #[derive(Clone, Debug, Serialize)]
@@ -76,14 +69,14 @@ pub fn check(elf: &[u8], summary: &Summary) -> anyhow::Result<Budgets> {
     })
 }
 
-/// The tick's regression guards.
+/// The tick's budget: what exceeds it (empty: within).
 pub fn tick_guard(mean: f64, max: u64) -> Vec<String> {
     let mut f = Vec::new();
-    if mean.is_nan() || mean > TICK_MEAN_GUARD {
-        f.push(format!("tick mean {mean:.0} > guard {TICK_MEAN_GUARD}"));
+    if mean.is_nan() || mean > TICK_MEAN_TARGET {
+        f.push(format!("tick mean {mean:.0} > {TICK_MEAN_TARGET}"));
     }
-    if max > TICK_MAX_GUARD {
-        f.push(format!("tick max {max} > guard {TICK_MAX_GUARD}"));
+    if max > TICK_MAX_TARGET {
+        f.push(format!("tick max {max} > {TICK_MAX_TARGET}"));
     }
     f
 }
@@ -94,11 +87,12 @@ mod tests {
 
     #[test]
     fn the_tick_guard_flags_a_regression_and_nan() {
-        assert!(tick_guard(14_865.0, 17_692).is_empty());
-        assert_eq!(tick_guard(15_001.0, 17_691).len(), 1);
-        assert_eq!(tick_guard(14_000.0, 17_901).len(), 1);
-        // the values before the budgets work are regressions now
-        assert_eq!(tick_guard(15_649.0, 18_265).len(), 2);
+        assert!(tick_guard(11_600.0, 14_346).is_empty());
+        assert!(tick_guard(12_000.0, 15_000).is_empty());
+        assert_eq!(tick_guard(12_001.0, 14_999).len(), 1);
+        assert_eq!(tick_guard(11_000.0, 15_001).len(), 1);
+        // the values before this work are over budget
+        assert_eq!(tick_guard(14_675.0, 17_540).len(), 2);
         assert_eq!(tick_guard(f64::NAN, 0).len(), 1);
     }
 }
