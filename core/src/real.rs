@@ -304,7 +304,12 @@ mod tests {
         ];
         v.extend((0..1000u32).map(|i| f32::from_bits(i.wrapping_mul(0x9E37_79B9))));
         for x in v {
-            assert_eq!(Real::is_finite(x), f32::is_finite(x), "{x:e} ({:#x})", x.to_bits());
+            assert_eq!(
+                Real::is_finite(x),
+                f32::is_finite(x),
+                "{x:e} ({:#x})",
+                x.to_bits()
+            );
         }
     }
 
