@@ -69,7 +69,12 @@
 //! identification has settled at least once since start-up and no change of the device
 //! is pending (the slow θ the row relies on are being re-identified), the fast row is
 //! solvable (|A1| above the lock threshold), the drive amplitude is steady (|A1|² at
-//! least [`DRIVE_STEADY2`] of its slow mean: not ringing down) and |rate| ≤
+//! least [`DRIVE_STEADY2`] of its slow mean: not ringing down), the narrow channel's
+//! quadrature agrees with the slow θ23 to `rate.gate_dev_dps` (a change of the device
+//! moves the quadrature at once, while the change detector needs a few samples, and the
+//! rate gate holds the detector while the rate moves: without this test `drift-retune`
+//! had 3 valid samples up to 40 °/s off at the drift's start, and the same drift under a
+//! 5 Hz rate sine ≈ 150 valid samples up to 880 °/s off) and |rate| ≤
 //! `rate.full_scale_dps`. The narrow channel gates the slow RLS only while the drive is
 //! steady, too.
 //!
@@ -333,6 +338,8 @@ pub struct RateState<T> {
     handover_due: bool,
     /// The slow identification has settled once since start-up.
     settled_once: bool,
+    /// The narrow channel's quadrature agrees with the slow θ23 (this sample).
+    quad_ok: bool,
     valid: bool,
 }
 
@@ -449,6 +456,7 @@ impl<T: Real> RateState<T> {
         self.est.solved = solvable;
         if !solvable {
             self.est.steady = false;
+            self.quad_ok = false;
             return;
         }
         let a2 = a.norm_sqr();
@@ -471,6 +479,7 @@ impl<T: Real> RateState<T> {
         // directions of the row and is left to the slow RLS
         let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
         let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
+        self.quad_ok = quad_ok;
         if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
             self.handover_due = true;
@@ -529,6 +538,7 @@ impl<T: Real> RateState<T> {
             && !change_pending
             && self.est.solved
             && self.est.steady
+            && self.quad_ok
             && self.est.gamma.abs() <= d.full_scale;
         self.valid
     }
