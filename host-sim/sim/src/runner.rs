@@ -17,7 +17,9 @@ use crate::effects::Effects;
 use crate::lockin::{LockinExt, LockinOut};
 use crate::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use crate::scenario::{EventKind, EventSpec, L0_M, PlantAt, PumpProfileSpec, Scenario};
-use crate::summary::{Convergence, PhysicalValues, RunCounters, RunSummary, ThetaPair};
+use crate::summary::{
+    Convergence, PhysicalValues, RateValidity, RunCounters, RunSummary, ThetaPair,
+};
 use crate::trace::{Event, RunResult, TraceRow};
 
 pub use crate::trace::Precision;
@@ -636,6 +638,11 @@ fn summarize(
         rate_dps_true: last.rate_dps_true,
         rate_dps_est: last.rate_dps_est,
         rate_rel_err: rel(last.rate_dps_est, last.rate_dps_true),
+        rate_validity: RateValidity::of(
+            main.trace
+                .iter()
+                .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
+        ),
         wy2_true_final: last.phys_true[4],
         wy2_est_final: last.phys_est[4],
         pump_centre_final_hz: main.pump_centre_final_hz,

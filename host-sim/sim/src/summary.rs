@@ -178,6 +178,39 @@ impl From<&Counters> for RunCounters {
     }
 }
 
+/// The rate output's validity flag over a run (`summary.json` `rate_validity`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct RateValidity {
+    /// Samples in the run.
+    pub samples: usize,
+    /// Samples whose fast rate was flagged valid.
+    pub valid: usize,
+    /// The largest |fast rate − true rate| over the valid samples, °/s (0 with none).
+    pub worst_valid_err_dps: f64,
+    /// The time of that sample, s (`None` with no valid sample).
+    pub worst_valid_at_s: Option<f64>,
+}
+
+impl RateValidity {
+    /// From `(rate_valid, fast rate, true rate, t)` of each sample.
+    pub fn of(rows: impl Iterator<Item = (bool, f64, f64, f64)>) -> Self {
+        let mut v = RateValidity::default();
+        for (valid, est, truth, t) in rows {
+            v.samples += 1;
+            if valid {
+                v.valid += 1;
+                let e = (est - truth).abs();
+                // a NaN error on a valid sample is the worst there is
+                if !(e <= v.worst_valid_err_dps) || v.worst_valid_at_s.is_none() {
+                    v.worst_valid_err_dps = if e.is_nan() { f64::INFINITY } else { e };
+                    v.worst_valid_at_s = Some(t);
+                }
+            }
+        }
+        v
+    }
+}
+
 /// `summary.json` of a run: the final sample's θ and physical parameters (true and
 /// estimated), the rate, the convergence times, the core's counters, the scenario's
 /// `[[measure]]` values (keys of their own, by the measure's name) and the ratios of the
@@ -208,6 +241,9 @@ pub struct RunSummary {
     pub rate_dps_est: f64,
     /// Relative error of the rate at the end.
     pub rate_rel_err: f64,
+    /// The rate output's validity over the run: how many samples were flagged valid, and
+    /// the largest |fast rate − true rate| among them.
+    pub rate_validity: RateValidity,
     /// True ωy² at the end.
     pub wy2_true_final: f64,
     /// Estimated ωy² at the end.
@@ -256,4 +292,36 @@ impl RunSummary {
 /// `summary.json`), plus the final newline.
 pub fn to_json_pretty<T: Serialize>(v: &T) -> serde_json::Result<String> {
     Ok(serde_json::to_string_pretty(&serde_json::to_value(v)?)? + "\n")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RateValidity;
+
+    #[test]
+    fn rate_validity_counts_and_finds_the_worst_valid_sample() {
+        let v = RateValidity::of(
+            [
+                (true, 150.5, 150.0, 0.0),
+                (false, 900.0, 150.0, 0.002),
+                (true, 148.0, 150.0, 0.004),
+                (true, 150.0, 150.0, 0.006),
+            ]
+            .into_iter(),
+        );
+        assert_eq!((v.samples, v.valid), (4, 3));
+        assert_eq!(
+            (v.worst_valid_err_dps, v.worst_valid_at_s),
+            (2.0, Some(0.004))
+        );
+        // none valid: no worst sample
+        let v = RateValidity::of([(false, 1.0, 0.0, 0.0)].into_iter());
+        assert_eq!((v.valid, v.worst_valid_at_s), (0, None));
+        // a NaN rate flagged valid is the worst there is
+        let v = RateValidity::of([(true, 1.0, 0.0, 0.0), (true, f64::NAN, 0.0, 1.0)].into_iter());
+        assert_eq!(
+            (v.worst_valid_err_dps, v.worst_valid_at_s),
+            (f64::INFINITY, Some(1.0))
+        );
+    }
 }

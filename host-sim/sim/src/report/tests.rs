@@ -5,7 +5,9 @@ use plotters::prelude::*;
 use super::figures::{health_bands, zoom_range};
 use super::*;
 use crate::plot::*;
-use crate::summary::{Convergence, PhysicalValues, RunCounters, RunSummary, ThetaPair};
+use crate::summary::{
+    Convergence, PhysicalValues, RateValidity, RunCounters, RunSummary, ThetaPair,
+};
 use crate::trace::{Event, Precision};
 
 fn synthetic_row(k: usize, twin: bool) -> TraceRow {
@@ -74,6 +76,7 @@ fn synthetic_summary() -> RunSummary {
         rate_dps_true: 150.0,
         rate_dps_est: 150.2,
         rate_rel_err: 1.3e-3,
+        rate_validity: RateValidity::default(),
         wy2_true_final: 1.0265,
         wy2_est_final: 1.0266,
         pump_centre_final_hz: 21913.95,

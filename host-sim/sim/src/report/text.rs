@@ -330,6 +330,20 @@ pub fn short_summary(result: &RunResult) -> String {
         "  rate: true {:.3} °/s, estimated {:.3} °/s",
         last.rate_dps_true, last.rate_dps_est
     );
+    let v = crate::summary::RateValidity::of(
+        result
+            .trace
+            .iter()
+            .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
+    );
+    let _ = match v.worst_valid_at_s {
+        Some(t) => writeln!(
+            s,
+            "  rate valid on {} of {} samples; worst valid error {:.2} °/s (t = {t:.3} s)",
+            v.valid, v.samples, v.worst_valid_err_dps
+        ),
+        None => writeln!(s, "  rate valid on 0 of {} samples", v.samples),
+    };
     let worst = THETA_DRIVE_NAMES
         .iter()
         .zip(last.theta_drive_true.iter().zip(&last.theta_drive_est))
