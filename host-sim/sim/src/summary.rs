@@ -199,10 +199,11 @@ impl RateValidity {
             v.samples += 1;
             if valid {
                 v.valid += 1;
-                let e = (est - truth).abs();
                 // a NaN error on a valid sample is the worst there is
-                if !(e <= v.worst_valid_err_dps) || v.worst_valid_at_s.is_none() {
-                    v.worst_valid_err_dps = if e.is_nan() { f64::INFINITY } else { e };
+                let e = (est - truth).abs();
+                let e = if e.is_nan() { f64::INFINITY } else { e };
+                if e > v.worst_valid_err_dps || v.worst_valid_at_s.is_none() {
+                    v.worst_valid_err_dps = e;
                     v.worst_valid_at_s = Some(t);
                 }
             }
