@@ -22,8 +22,8 @@ pub const RAM_BUDGET: u64 = 32 * 1024;
 /// target was first met, 11 610 with the rate flag's quadrature test; 14 675 before that
 /// work, 17 859 before the first tick work).
 pub const TICK_MEAN_TARGET: f64 = 12_000.0;
-/// The costliest tick (measured 14 346, then 14 358: tick 1575, a re-linearisation with
-/// the rate channel's hand-over; 17 540 and 24 364 before).
+/// The costliest tick (measured 14 346, then 14 358: tick 1575, where the supervisor starts
+/// the retune; 17 540 and 24 364 before).
 pub const TICK_MAX_TARGET: u64 = 15_000;
 
 /// The budgets against an image and a loop summary.
