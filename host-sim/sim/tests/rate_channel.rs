@@ -5,6 +5,7 @@
 
 use paragyro_simulator::rate_response::{self, Options, T0_S};
 use paragyro_simulator::runner::Precision;
+use paragyro_simulator::summary::RateValidity;
 
 fn opts(seed: u64) -> Options {
     Options {
@@ -113,16 +114,20 @@ fn rate_flag_drops_while_the_device_drifts() {
         valid_after_start > 2000,
         "{valid_after_start} valid samples"
     );
-    let worst = tr
-        .iter()
-        .filter(|r| r.rate_valid)
-        .map(|r| ((r.rate_dps_est - r.rate_dps_true).abs(), r.t_s))
-        .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
+    assert_valid_within(&tr, 2.0);
+}
+
+/// No sample flagged valid is more than `tol` °/s off the true rate.
+fn assert_valid_within(tr: &[paragyro_simulator::trace::TraceRow], tol: f64) {
+    let v = RateValidity::of(
+        tr.iter()
+            .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
+    );
     assert!(
-        worst.0 < 2.0,
-        "valid while {:.1} °/s off at {} s",
-        worst.0,
-        worst.1
+        v.worst_valid_err_dps < tol,
+        "valid while {:.1} °/s off at {:?} s",
+        v.worst_valid_err_dps,
+        v.worst_valid_at_s
     );
 }
 
@@ -144,17 +149,7 @@ fn rate_flag_is_never_valid_and_wrong_when_the_device_drifts_under_motion() {
     )
     .unwrap();
     let tr = rate_response::trace(&sc, Precision::F32, 1).unwrap();
-    let worst = tr
-        .iter()
-        .filter(|r| r.rate_valid)
-        .map(|r| ((r.rate_dps_est - r.rate_dps_true).abs(), r.t_s))
-        .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
-    assert!(
-        worst.0 < 15.0,
-        "valid while {:.1} °/s off at {} s",
-        worst.0,
-        worst.1
-    );
+    assert_valid_within(&tr, 15.0);
 }
 
 /// The rate noise (noisy − noise-free run, same seed) against the bound of the same
