@@ -638,11 +638,7 @@ fn summarize(
         rate_dps_true: last.rate_dps_true,
         rate_dps_est: last.rate_dps_est,
         rate_rel_err: rel(last.rate_dps_est, last.rate_dps_true),
-        rate_validity: RateValidity::of(
-            main.trace
-                .iter()
-                .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
-        ),
+        rate_validity: RateValidity::of_trace(&main.trace),
         wy2_true_final: last.phys_true[4],
         wy2_est_final: last.phys_est[4],
         pump_centre_final_hz: main.pump_centre_final_hz,

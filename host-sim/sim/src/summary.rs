@@ -210,6 +210,15 @@ impl RateValidity {
         }
         v
     }
+
+    /// Of a run's trace (its `rate_valid`, `rate_dps_est`, `rate_dps_true`, `t_s`).
+    pub fn of_trace(trace: &[crate::trace::TraceRow]) -> Self {
+        Self::of(
+            trace
+                .iter()
+                .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
+        )
+    }
 }
 
 /// `summary.json` of a run: the final sample's θ and physical parameters (true and

@@ -119,10 +119,7 @@ fn rate_flag_drops_while_the_device_drifts() {
 
 /// No sample flagged valid is more than `tol` °/s off the true rate.
 fn assert_valid_within(tr: &[paragyro_simulator::trace::TraceRow], tol: f64) {
-    let v = RateValidity::of(
-        tr.iter()
-            .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
-    );
+    let v = RateValidity::of_trace(tr);
     assert!(
         v.worst_valid_err_dps < tol,
         "valid while {:.1} °/s off at {:?} s",

@@ -330,12 +330,7 @@ pub fn short_summary(result: &RunResult) -> String {
         "  rate: true {:.3} °/s, estimated {:.3} °/s",
         last.rate_dps_true, last.rate_dps_est
     );
-    let v = crate::summary::RateValidity::of(
-        result
-            .trace
-            .iter()
-            .map(|r| (r.rate_valid, r.rate_dps_est, r.rate_dps_true, r.t_s)),
-    );
+    let v = crate::summary::RateValidity::of_trace(&result.trace);
     let _ = match v.worst_valid_at_s {
         Some(t) => writeln!(
             s,
