@@ -1,0 +1,106 @@
+//! Clean devices with tolerances, diagnosed (development of the `none` gate and the
+//! parameter intervals): `cargo run --release -p paragyro-diagnose --example clean -- FIRST
+//! COUNT` draws devices `tol=FIRST..FIRST+COUNT` as the blind benchmark does (no effect,
+//! a rate table, the die warming 4 K or
+//! `TEMP_RISE_K`) and prints, per device, the verdict, the held-out
+//! residual over the record's noise, the estimated against the true noise energy ratio,
+//! and each device parameter's (calibrated − true)/σ; then the 1σ coverage.
+
+use paragyro_diagnose::blind::device::DeviceDraw;
+use paragyro_diagnose::diagnose::{Options, diagnose};
+use paragyro_simulator::record::{RecordOptions, simulate_record_with};
+use paragyro_simulator::scenario::Scenario;
+use rand::SeedableRng;
+use rayon::prelude::*;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<u64> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse())
+        .collect::<Result<_, _>>()?;
+    let [first, count] = args[..] else {
+        anyhow::bail!("usage: clean FIRST COUNT");
+    };
+    let sc = Scenario::load("characterise")?;
+    // the die's warming over the record, K (TEMP_RISE_K; the blind benchmark draws 2–8)
+    // the noise density, pm/√Hz (NOISE_PM; default: the device's draw)
+    let noise_pm: Option<f64> = std::env::var("NOISE_PM")
+        .ok()
+        .map(|v| v.parse())
+        .transpose()?;
+    let temp_rise: f64 = std::env::var("TEMP_RISE_K").map_or(Ok(4.0), |v| v.parse())?;
+    let names = paragyro_core::physics::PHYSICAL_NAMES;
+    let rows: Vec<anyhow::Result<(String, Vec<f64>)>> = (first..first + count)
+        .into_par_iter()
+        .map(|s| {
+            let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(s);
+            let mut dev = DeviceDraw::draw(&mut rng);
+            if let Some(pm) = noise_pm {
+                dev.noise_pm_rthz = pm;
+            }
+            let opts = RecordOptions {
+                seed: Some(1000 + s),
+                rate_table: true,
+                temp: Some((25.0, temp_rise)),
+                ..RecordOptions::default()
+            };
+            let (rec, _) = simulate_record_with(&dev.apply(&sc), &opts, &mut |_| {})?;
+            let r = diagnose(&rec, &Options::default())?.report;
+            let truth = dev.physical(&sc).as_array();
+            let z: Vec<f64> = (0..10)
+                .map(|i| {
+                    let p = r
+                        .parameter_face
+                        .parameters
+                        .iter()
+                        .find(|p| p.name == names[i])
+                        .expect("every device parameter is calibrated");
+                    (p.device - truth[i]) / p.sigma
+                })
+                .collect();
+            let wy2 = r
+                .parameter_face
+                .parameters
+                .iter()
+                .find(|p| p.name == "wy2")
+                .expect("wy2 is calibrated");
+            let line = format!(
+                "tol={s:<4} {:<8} res/noise {:.3}  nu2 {:.3} (true {:.3})  wy2 {:+.4} ± {:.4} ppm  z {}",
+                r.verdict.to_string(),
+                r.residual_over_noise,
+                r.parameter_face.noise_energy_ratio,
+                dev.noise_pm_rthz.powi(2),
+                1e6 * (wy2.device - truth[4]) / truth[4],
+                1e6 * wy2.sigma / truth[4],
+                z.iter()
+                    .map(|v| format!("{v:+6.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+            Ok((line, z))
+        })
+        .collect();
+    let mut all = Vec::new();
+    for r in rows {
+        let (line, z) = r?;
+        println!("{line}");
+        all.push(z);
+    }
+    println!("z columns: {:?}", &names[..10]);
+    for i in 0..10 {
+        let c = all.iter().filter(|z| z[i].abs() <= 1.0).count();
+        let rms = (all.iter().map(|z| z[i] * z[i]).sum::<f64>() / all.len() as f64).sqrt();
+        let mean = all.iter().map(|z| z[i]).sum::<f64>() / all.len() as f64;
+        println!(
+            "{:<8} covered {c}/{}  mean z {mean:+.2}  rms z {rms:.2}",
+            names[i],
+            all.len()
+        );
+    }
+    let c: usize = all
+        .iter()
+        .map(|z| z.iter().filter(|v| v.abs() <= 1.0).count())
+        .sum();
+    println!("1σ coverage {c}/{}", 10 * all.len());
+    Ok(())
+}
