@@ -2,7 +2,8 @@
 //! parameter intervals): `cargo run --release -p paragyro-diagnose --example clean -- FIRST
 //! COUNT` draws devices `tol=FIRST..FIRST+COUNT` as the blind benchmark does (no effect,
 //! a rate table, the die warming 4 K or
-//! `TEMP_RISE_K`) and prints, per device, the verdict, the held-out
+//! `TEMP_RISE_K`; `NOISE_PM` sets every device's noise density, `ACCEL0` zeroes the
+//! accelerations) and prints, per device, the verdict, the held-out
 //! residual over the record's noise, the estimated against the true noise energy ratio,
 //! and each device parameter's (calibrated − true)/σ; then the 1σ coverage.
 
@@ -37,6 +38,9 @@ fn main() -> anyhow::Result<()> {
             let mut dev = DeviceDraw::draw(&mut rng);
             if let Some(pm) = noise_pm {
                 dev.noise_pm_rthz = pm;
+            }
+            if std::env::var("ACCEL0").is_ok() {
+                dev.accel_mps2 = [0.0; 2];
             }
             let opts = RecordOptions {
                 seed: Some(1000 + s),
