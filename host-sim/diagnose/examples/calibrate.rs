@@ -93,6 +93,12 @@ fn main() -> anyhow::Result<()> {
             c.effect, c.size, c.size_sigma, c.gap_closure, c.significant
         );
     }
+    for c in &r.confirmation {
+        println!(
+            "  re-simulated {}: unexplained {:.3}, rows {:?}, residual {:.2} × the noise, confirmed {}",
+            c.effect, c.unexplained, c.unexplained_rows, c.residual_over_noise, c.confirmed
+        );
+    }
     println!(
         "beat {:.3} Hz; {:?}",
         r.vibration_beat_scan.best_hz, r.timing_s

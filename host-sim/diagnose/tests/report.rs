@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
-use paragyro_diagnose::diagnose::report::{BeatScan, FORMAT};
+use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT};
 use paragyro_diagnose::diagnose::{
     Answer, Candidate, Energies, HowFar, OutputError, Rate, Report, Secondary, Separation,
     SpansReport, Thresholds, Verdict,
@@ -133,6 +133,29 @@ fn place() -> impl Strategy<Value = Where> {
         })
 }
 
+fn confirmation() -> impl Strategy<Value = Confirmation> {
+    (
+        "[a-z_]{3,20}=[0-9.e-]{1,8}",
+        num(),
+        prop::collection::vec(0usize..10, 0..3),
+        num(),
+        num(),
+        any::<bool>(),
+    )
+        .prop_map(
+            |(effect, unexplained, unexplained_rows, residual_over_noise, nu2, confirmed)| {
+                Confirmation {
+                    effect,
+                    unexplained,
+                    unexplained_rows,
+                    residual_over_noise,
+                    noise_energy_ratio: nu2,
+                    confirmed,
+                }
+            },
+        )
+}
+
 fn report() -> impl Strategy<Value = Report> {
     (
         verdict(),
@@ -142,13 +165,25 @@ fn report() -> impl Strategy<Value = Report> {
         prop::option::of(how_far()),
         place(),
         prop::option::of(prop::option::of(num())),
-        prop::collection::vec(
-            (prop::collection::vec(effect(), 1..3), "[a-z ]{0,12}"),
-            0..3,
+        (
+            prop::collection::vec(
+                (prop::collection::vec(effect(), 1..3), "[a-z ]{0,12}"),
+                0..3,
+            ),
+            prop::collection::vec(confirmation(), 0..3),
         ),
     )
         .prop_map(
-            |(verdict, ranking, (gb, ga, gc, gf, un), closest, far, location, rate, sep)| Report {
+            |(
+                verdict,
+                ranking,
+                (gb, ga, gc, gf, un),
+                closest,
+                far,
+                location,
+                rate,
+                (sep, conf),
+            )| Report {
                 format: FORMAT.into(),
                 verdict,
                 ranking,
@@ -196,6 +231,7 @@ fn report() -> impl Strategy<Value = Report> {
                     resimulations: 2,
                 },
                 residual_over_noise: un,
+                confirmation: conf,
                 location,
                 model: "Table 2 (default)".into(),
                 rate: match rate {
@@ -223,9 +259,11 @@ fn report() -> impl Strategy<Value = Report> {
         )
 }
 
-/// The keys of report.json (format 2: format 1's and the parameter face).
-const KEYS: [&str; 26] = [
+/// The keys of report.json (format 3: format 2's — format 1's and the parameter face — and
+/// the confirmation by re-simulation).
+const KEYS: [&str; 27] = [
     "closest_library_effect",
+    "confirmation",
     "energies",
     "format",
     "gap_after",

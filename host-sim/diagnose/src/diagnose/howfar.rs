@@ -8,6 +8,7 @@ use paragyro_simulator::effects::{Effect, EffectSpec, Signature};
 use serde::{Deserialize, Serialize};
 
 use super::columns::Columns;
+use super::lsq::Fit;
 use super::resim::{OutputError, Resim, lockin_noise_diff_ratio, output_error};
 use super::rows::Rows;
 use super::verdict::Decision;
@@ -52,14 +53,24 @@ pub(crate) struct Far {
 /// The verdict's effects at their fitted sizes (from the fit of exactly their columns) and
 /// the vibration's phase.
 fn verdict_specs(cols: &Columns, rows: &Rows, decision: &Decision) -> (Vec<EffectSpec>, f64) {
+    if decision.verdict_cols.is_empty() {
+        return (Vec::new(), 0.0);
+    }
+    specs_of(cols, rows, &decision.verdict.effects(), &decision.after_fit)
+}
+
+/// `effects` at their sizes in `f`, a fit of the baseline columns followed by exactly
+/// theirs in that order, and the vibration's phase.
+pub(crate) fn specs_of(
+    cols: &Columns,
+    rows: &Rows,
+    effects: &[Effect],
+    f: &Fit,
+) -> (Vec<EffectSpec>, f64) {
     let mut specs = Vec::new();
     let mut vib_phase = 0.0;
-    if decision.verdict_cols.is_empty() {
-        return (specs, vib_phase);
-    }
-    let f = &decision.after_fit;
     let mut k = cols.base_cols.len();
-    for effect in decision.verdict.effects() {
+    for &effect in effects {
         if effect.signature() == Some(Signature::Vibration) {
             let (gr, gi) = (f.beta[k], f.beta[k + 1]);
             vib_phase = gi.atan2(gr);

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 pub use super::calibrate::ParameterFace;
 use super::columns::Columns;
+pub use super::confirm::Confirmation;
 use super::howfar::Far;
 pub use super::howfar::HowFar;
 pub use super::locate::{AxisShare, Regime, Tercile, TimeSpan};
@@ -25,8 +26,8 @@ use super::{
     VIB_BEAT_MAX_HZ,
 };
 
-/// The format tag of report.json.
-pub const FORMAT: &str = "paragyro-diagnosis 2";
+/// The format tag of report.json (3: format 2's keys and `confirmation`).
+pub const FORMAT: &str = "paragyro-diagnosis 3";
 
 /// One candidate's result.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -194,6 +195,10 @@ pub struct Report {
     pub output_error: Option<HowFar>,
     /// The parameter face: the calibrated device against the model, and its hypotheses.
     pub parameter_face: ParameterFace,
+    /// The library effects re-simulated when the linear test left the verdict `unknown`
+    /// ([`super::confirm`]), in the order tested; empty when that test did not run.
+    #[serde(default)]
+    pub confirmation: Vec<Confirmation>,
     /// Held-out baseline energy per row over the record's own noise per row
     /// ([`NOISE_ROW_ENERGY`] × the record's noise energy ratio): about 1 at the noise.
     pub residual_over_noise: f64,
@@ -269,6 +274,7 @@ pub(crate) struct Parts<'a> {
     pub face: ParameterFace,
     pub place: Located,
     pub far: &'a Far,
+    pub confirmation: Vec<Confirmation>,
     pub seconds: f64,
     pub timing: BTreeMap<String, f64>,
 }
@@ -313,6 +319,7 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
         output_error: p.far.report.clone(),
         residual_over_noise: d.residual_over_noise,
         parameter_face: p.face,
+        confirmation: p.confirmation,
         location: p.place.location,
         model: p.opts.model.source.clone(),
         rate,

@@ -12,6 +12,7 @@ use paragyro_core::physics::{gamma_from_rate_dps, theta_from_physical};
 use paragyro_core::rows::{Envelopes, Known, NROWS};
 use paragyro_core::svf::SvfCoeffs;
 use paragyro_core::{Config, Estimator};
+use paragyro_simulator::effects::EffectSpec;
 use paragyro_simulator::lockin::LockinOut;
 use paragyro_simulator::record::{Record, config_for};
 
@@ -177,6 +178,18 @@ pub(crate) struct Rows {
 impl Rows {
     /// Pass 0 (the model's rows), the rate, and the re-simulation of the model.
     pub(crate) fn build(rec: &Record, opts: &Options, timing: &mut Timing) -> anyhow::Result<Self> {
+        Self::build_with(rec, opts, &[], 0.0, timing)
+    }
+
+    /// [`Rows::build`] with `effects` (and the vibration's phase) added to the simulator
+    /// re-run: the gap the model with those effects leaves.
+    pub(crate) fn build_with(
+        rec: &Record,
+        opts: &Options,
+        effects: &[EffectSpec],
+        vib_phase0: f64,
+        timing: &mut Timing,
+    ) -> anyhow::Result<Self> {
         let n = rec.rows.len();
         anyhow::ensure!(
             n >= 1000,
@@ -241,7 +254,7 @@ impl Rows {
         };
         rows.gamma_sim = rows.rate_ref.is_none().then(|| rows.fitted_rate());
         timing.tick("rows");
-        rows.subtract_simulator(rec, opts, timing)?;
+        rows.subtract_simulator(rec, opts, effects, vib_phase0, timing)?;
         Ok(rows)
     }
 
@@ -281,6 +294,8 @@ impl Rows {
         &mut self,
         rec: &Record,
         opts: &Options,
+        effects: &[EffectSpec],
+        vib_phase0: f64,
         timing: &mut Timing,
     ) -> anyhow::Result<()> {
         let n = self.t.len();
@@ -290,8 +305,8 @@ impl Rows {
                 model: &opts.model,
                 gamma: self.gamma_sim,
                 rate_ref: self.rate_ref.as_deref(),
-                effects: &[],
-                vib_phase0: 0.0,
+                effects,
+                vib_phase0,
                 steps_per_period: opts.steps_per_period,
             };
             let sim = resim.run(0..n)?;
@@ -303,7 +318,11 @@ impl Rows {
                 self.usable[k] &= ps.usable[k];
             }
             self.before_sim = Some(sim);
-            timing.tick("resimulate_model");
+            timing.tick(if effects.is_empty() {
+                "resimulate_model"
+            } else {
+                "resimulate_to_confirm"
+            });
         } else if let Some(rr) = &self.rate_ref {
             for k in 0..n {
                 let dg = self.gpd * rr[k] - self.gamma_nom;
