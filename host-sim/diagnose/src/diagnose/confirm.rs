@@ -109,6 +109,7 @@ pub(crate) fn confirm(
                     },
                     closest: Answer::Effect(effect),
                     verdict_cols,
+                    gap_after: (fit_e.e_hold - inp.fits.e_floor).max(0.0),
                     after_fit: fit_e,
                     unexplained,
                     unexplained_rows: Vec::new(),

@@ -40,6 +40,36 @@ fn parameter_face(s: &mut String, r: &Report) {
     }
 }
 
+/// The candidates re-simulated when the linear test left the verdict `unknown`.
+fn confirmation(s: &mut String, r: &Report) {
+    if r.confirmation.is_empty() {
+        return;
+    }
+    s.push_str(&format!(
+        "\n\nThe linear test left the verdict `unknown`; re-simulated at their fitted sizes (at most {:.0} % of the gap above the noise may be left):\n\n| effect | gap above the noise left | rows left | residual / noise | confirmed |\n|---|---|---|---|---|\n",
+        100.0 * UNEXPLAINED_MAX
+    ));
+    for c in &r.confirmation {
+        let rows: Vec<&str> = c
+            .unexplained_rows
+            .iter()
+            .filter_map(|&i| super::ROW_LABELS.get(i).copied())
+            .collect();
+        s.push_str(&format!(
+            "| `{}` | {:.1} % | {} | {} | {} |\n",
+            c.effect,
+            100.0 * c.unexplained,
+            if rows.is_empty() {
+                "–".into()
+            } else {
+                rows.join(", ")
+            },
+            g4(c.residual_over_noise),
+            if c.confirmed { "yes" } else { "no" }
+        ));
+    }
+}
+
 /// report.md of a report of the record `record_name`.
 pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
     let mut s = format!("# Sim-to-real diagnosis of `{record_name}`\n\n");
@@ -54,6 +84,7 @@ pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
         r.rate.source()
     ));
     s.push_str(&verdict_text(r));
+    confirmation(&mut s, r);
     parameter_face(&mut s, r);
     how_far(&mut s, r);
     which(&mut s, r);
@@ -86,8 +117,20 @@ fn verdict_text(r: &Report) -> String {
             100.0 * UNEXPLAINED_MAX
         ),
         Answer::Effect(v) => format!(
-            "`{v}` is significant and closes {:.0} % of the explainable held-out gap.",
-            100.0 * r.ranking.first().map_or(0.0, |c| c.gap_closure)
+            "`{v}` is significant and closes {:.0} % of the explainable held-out gap{}.",
+            100.0
+                * r.ranking
+                    .iter()
+                    .find(|c| c.effect == v)
+                    .map_or(0.0, |c| c.gap_closure),
+            if r.confirmation.iter().any(|c| c.confirmed) {
+                format!(
+                    " (linearly); re-simulated with it, it leaves at most {:.0} % of the gap above the noise (below)",
+                    100.0 * UNEXPLAINED_MAX
+                )
+            } else {
+                String::new()
+            }
         ),
     }
 }
