@@ -140,9 +140,7 @@ impl ThetaFit {
 /// Batch least squares of the 14 θ columns of the record's rows on the gap `rows.y`,
 /// over the fit span (cluster-robust covariance over its blocks).
 pub(crate) fn fit_theta(rows: &Rows, spans: &Spans) -> ThetaFit {
-    let cols: Vec<Vec<[f64; NR]>> = (0..14)
-        .map(|j| rows.base.theta.iter().map(|c| c[j]).collect())
-        .collect();
+    let cols = rows.theta_columns();
     let refs: Vec<&[[f64; NR]]> = cols.iter().map(|c| c.as_slice()).collect();
     let bank = Bank::build(
         &refs,

@@ -160,9 +160,7 @@ fn test_one(
         .zip(&rows_e.usable)
         .map(|(a, b)| *a && *b)
         .collect();
-    let th: Vec<Vec<[f64; NR]>> = (0..14)
-        .map(|j| rows_e.base.theta.iter().map(|c| c[j]).collect())
-        .collect();
+    let th = rows_e.theta_columns();
     let th_refs: Vec<&[[f64; NR]]> = th.iter().map(|c| c.as_slice()).collect();
     let bank = Bank::build(
         &th_refs,

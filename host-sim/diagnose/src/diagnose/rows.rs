@@ -258,6 +258,14 @@ impl Rows {
         Ok(rows)
     }
 
+    /// The 14 weighted θ columns of the model's pass, each as one column (per sample, 10
+    /// rows) for [`super::lsq::Bank`].
+    pub(crate) fn theta_columns(&self) -> Vec<Vec<[f64; NR]>> {
+        (0..14)
+            .map(|j| self.base.theta.iter().map(|c| c[j]).collect())
+            .collect()
+    }
+
     /// Removes `Δθ` (the calibration's refinement) from the gap: `y −= Φ·Δθ`.
     pub(crate) fn remove_theta(&mut self, dtheta: &[f64; 14]) {
         for (y, th) in self.y.iter_mut().zip(&self.base.theta) {
