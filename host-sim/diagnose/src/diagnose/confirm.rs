@@ -1,10 +1,11 @@
 //! Stage 4b, a large effect confirmed by re-simulation. The structural columns are linear
 //! about the calibrated model, and the calibration has absorbed part of a large effect:
-//! then the closest library effect, significant and closing most of what can be closed,
-//! can still leave more than [`UNEXPLAINED_MAX`] of the gap above the noise, and the
-//! verdict would be `unknown` (blind run 5: a force leak at 72× its limit, its size fitted
-//! within 0.2 %). Here the simulator is re-run with that effect at its fitted size, on the
-//! model recalibrated jointly with it, the 14 θ refitted on the gap that run leaves, and
+//! then a library effect, significant and closing most of what can be closed, can still
+//! leave more than [`UNEXPLAINED_MAX`] of the gap above the noise, and the verdict would be
+//! `unknown` (blind run 5: a force leak at 72× its limit, its size fitted within 0.2 %).
+//! Here the simulator is re-run with such a candidate at its fitted size ([`confirm`] says
+//! which, at most [`CONFIRM_MAX`]), on the model recalibrated jointly with it, the 14 θ
+//! refitted on the gap that run leaves, the record's noise re-estimated against it, and
 //! the same two rules applied to what is left on the held-out span: at most
 //! [`UNEXPLAINED_MAX`] of the gap above the noise in total, and no row holding a share of
 //! the gap left more than [`ROW_UNEXPLAINED_MAX`] unexplained. Only then is the effect the
@@ -28,7 +29,7 @@ use super::{
 };
 use paragyro_simulator::effects::Effect;
 
-/// The re-simulation test of the closest library effect (report.json's `confirmation`).
+/// The re-simulation test of one candidate (an entry of report.json's `confirmation`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Confirmation {
     /// The effect re-simulated (`NAME=SIZE[@PARAM]`).
