@@ -245,60 +245,47 @@ pub(crate) struct Stage<'a> {
     pub fits: &'a rank::Fits,
 }
 
+/// Stages 1 and 1b: the record's rows about the model, the calibration's first fit on
+/// them (without a re-simulation: the fit sees the rows' own approximations, which the fits
+/// on the re-simulations remove), then [`CALIBRATION_RESIMULATIONS`] Gauss–Newton steps: the
+/// simulator re-run on the record's inputs with the latest parameters, the rows minus its
+/// rows, the θ refitted on that gap. Returns the last rows, their spans, the options with
+/// the calibrated model and the last fit (its `Δθ` not yet removed from the rows).
+fn calibration(
+    rec: &Record,
+    opts: &Options,
+    timing: &mut Timing,
+) -> anyhow::Result<(rows::Rows, rows::Spans, Options, calibrate::ThetaFit)> {
+    let no_resim = Options {
+        resimulate: false,
+        ..opts.clone()
+    };
+    let mut rows = rows::Rows::build(rec, &no_resim, timing)?;
+    let mut spans = rows::Spans::of(&rows)?;
+    let mut fit = calibrate::fit_theta(&rows, &spans);
+    let label = format!("{} calibrated on the record", opts.model.source);
+    let mut opts_cal = opts.clone();
+    opts_cal.model = calibrate::calibrated_model(&opts.model, &rows, &fit, &label);
+    timing.tick("calibration_fit");
+    if opts.resimulate {
+        for step in 0..CALIBRATION_RESIMULATIONS {
+            if step > 0 {
+                opts_cal.model = calibrate::calibrated_model(&opts_cal.model, &rows, &fit, &label);
+            }
+            rows = rows::Rows::build(rec, &opts_cal, timing)?;
+            spans = rows::Spans::of(&rows)?;
+            fit = calibrate::fit_theta(&rows, &spans);
+        }
+    }
+    Ok((rows, spans, opts_cal, fit))
+}
+
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
 pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let wall = Instant::now();
     let mut timing = Timing::new();
-    // 1. the record's rows about the model (minus the simulator's on the same inputs)
-    // (without the re-simulation: the calibration's first fit sees the rows' own
-    // approximations, which the fit on the calibrated re-simulation removes)
-    let rows0 = rows::Rows::build(
-        rec,
-        &Options {
-            resimulate: false,
-            ..opts.clone()
-        },
-        &mut timing,
-    )?;
-    let spans0 = rows::Spans::of(&rows0)?;
-    // 1b. calibrate: the device's θ on the fit span, the simulator re-run with them, the
-    // fit refined on the new gap (the parameter face)
-    let fit0 = calibrate::fit_theta(&rows0, &spans0);
-    let cal_model = calibrate::calibrated_model(
-        &opts.model,
-        &rows0,
-        &fit0,
-        &format!("{} calibrated on the record", opts.model.source),
-    );
-    timing.tick("calibration_fit");
-    let opts_cal = Options {
-        model: cal_model,
-        ..opts.clone()
-    };
-    let (rows, spans) = if opts.resimulate {
-        let r = rows::Rows::build(rec, &opts_cal, &mut timing)?;
-        let s = rows::Spans::of(&r)?;
-        (r, s)
-    } else {
-        (rows0, spans0)
-    };
-    let (mut rows, mut spans, mut opts_cal) = (rows, spans, opts_cal);
-    let mut fit1 = calibrate::fit_theta(&rows, &spans);
-    // more Gauss–Newton steps: the simulator re-run with the parameters the last fit gave,
-    // and the fit refined on the new gap
-    if opts.resimulate {
-        for _ in 1..CALIBRATION_RESIMULATIONS {
-            opts_cal.model = calibrate::calibrated_model(
-                &opts_cal.model,
-                &rows,
-                &fit1,
-                &format!("{} calibrated on the record", opts.model.source),
-            );
-            rows = rows::Rows::build(rec, &opts_cal, &mut timing)?;
-            spans = rows::Spans::of(&rows)?;
-            fit1 = calibrate::fit_theta(&rows, &spans);
-        }
-    }
+    // 1. the rows and 1b. the calibration (the parameter face)
+    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing)?;
     // the calibration's refinement is part of the model: the structural face starts from
     // the gap it leaves
     rows.remove_theta(&fit1.dtheta);
