@@ -210,3 +210,33 @@ fn a_large_force_leak_is_confirmed_by_resimulation() {
         .unwrap();
     assert!((size - 7e-4).abs() < 0.05 * 7e-4, "{size}");
 }
+
+/// A simulated record names its integrator's grid (`simulator_omega_max`) and the
+/// re-simulation takes it, so RK4's dispersion (ω² 8.3e-8 low at 128 steps per period)
+/// cancels. With the diagnosis's own grid (a 1 % margin on the record's pump against the
+/// record's 3 %), ωy² came out +0.006–0.009 ppm on clean devices at 0.1 pm/√Hz, 9–19σ
+/// (`examples/clean 200 8` with `NOISE_PM=0.1 TEMP_RISE_K=0 ACCEL0=1`).
+#[test]
+fn a_simulated_records_own_integrator_grid_leaves_no_wy2_bias() {
+    let sc = Scenario::load("characterise").unwrap();
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(200);
+    let mut dev = DeviceDraw::draw(&mut rng);
+    dev.noise_pm_rthz = 0.1;
+    dev.accel_mps2 = [0.0; 2];
+    let opts = RecordOptions {
+        seed: Some(1200),
+        rate_table: true,
+        temp: Some((25.0, 0.0)),
+        ..RecordOptions::default()
+    };
+    let (rec, _) = simulate_record_with(&dev.apply(&sc), &opts, &mut |_| {}).unwrap();
+    assert!(
+        rec.header
+            .extra_value(paragyro_simulator::record::SIM_OMEGA_MAX_KEY)
+            .is_some(),
+        "the simulated record names its grid"
+    );
+    let r = diagnose(&rec, &Options::default()).unwrap().report;
+    let truth = dev.physical(&sc).wy2;
+    within(&r, "wy2", truth, 3.0);
+}

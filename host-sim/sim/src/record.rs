@@ -157,6 +157,13 @@ impl RecordHeader {
     }
 }
 
+/// The header key of a simulated record's integrator grid: the `omega_max` its RK4 step
+/// count was chosen for (`runner::omega_max`). At 128 steps per period RK4 leaves an
+/// oscillation 4.1e-8 slow, ∝ h⁴: a re-simulation on another grid (the diagnosis chose
+/// `omega_max` from the record's pump with another margin, 2 % apart) differed from the
+/// record by ≈ 8e-9 in ω̂y². Only the simulator writes it; a real device's record has none.
+pub const SIM_OMEGA_MAX_KEY: &str = "simulator_omega_max";
+
 /// One 500 Hz sample of a record.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RecordRow {

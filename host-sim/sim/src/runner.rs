@@ -87,8 +87,9 @@ pub fn core_config(sc: &Scenario) -> Config {
 }
 
 /// Largest ω (pump half-frequency, non-dimensional) the run may reach, for the
-/// integrator's step count.
-fn omega_max(sc: &Scenario, cfg: &Config) -> f64 {
+/// integrator's step count (a simulated record names it in its header,
+/// [`crate::record::SIM_OMEGA_MAX_KEY`]).
+pub fn omega_max(sc: &Scenario, cfg: &Config) -> f64 {
     let f0 = sc.sim.f0_hz;
     let mut pump = sc.pump_centre_hz();
     for e in sc.control_events() {

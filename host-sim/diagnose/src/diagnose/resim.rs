@@ -339,7 +339,7 @@ impl Resim<'_> {
             omega0_rad_s: omega0,
             fs_hz: h.fs_hz,
             steps_per_period,
-            omega_max: (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5),
+            omega_max: sim_grid(h, pump_max),
             lpf_order: h.lockin_lpf_order,
             lpf_hz: h.lockin_lpf_hz * (1.0 + fx.lockin_mismatch),
             noise_density: 0.0,
@@ -411,4 +411,15 @@ pub(crate) fn with_lockin(rec: &Record, li: &[LockinOut]) -> Record {
         }
     }
     r
+}
+
+/// The integrator's `omega_max`: a simulated record's own (its header names it: the same
+/// RK4 grid, the same dispersion, which cancels), else the record's largest pump frequency
+/// with a 1 % margin.
+fn sim_grid(h: &paragyro_simulator::record::RecordHeader, pump_max: f64) -> f64 {
+    let from_pump = (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5);
+    h.extra_value(paragyro_simulator::record::SIM_OMEGA_MAX_KEY)
+        .and_then(|v| v.parse::<f64>().ok())
+        .filter(|w| w.is_finite() && *w >= pump_max / (2.0 * h.f0_hz) && *w <= 4.0)
+        .unwrap_or(from_pump)
 }

@@ -124,6 +124,12 @@ pub fn simulate_record_ext(
             format!("paragyro-sim {}", env!("CARGO_PKG_VERSION")),
         ),
         ("device".into(), "simulated".into()),
+        // the integrator's grid (not the device's): a re-simulation on the same grid has
+        // the same RK4 dispersion, which then cancels (the diagnosis's numerics)
+        (
+            super::SIM_OMEGA_MAX_KEY.into(),
+            format!("{}", runner::omega_max(sc, &cfg)),
+        ),
     ];
     let t_end = rows.last().map_or(0.0, |r| r.t_s);
     let closed_loop = TruthClosedLoop {
