@@ -214,8 +214,9 @@ fn a_large_force_leak_is_confirmed_by_resimulation() {
 /// A simulated record names its integrator's grid (`simulator_omega_max`) and the
 /// re-simulation takes it, so RK4's dispersion (ω² 8.3e-8 low at 128 steps per period)
 /// cancels. With the diagnosis's own grid (a 1 % margin on the record's pump against the
-/// record's 3 %), ωy² came out +0.006–0.009 ppm on clean devices at 0.1 pm/√Hz, 9–19σ
-/// (`examples/clean 200 8` with `NOISE_PM=0.1 TEMP_RISE_K=0 ACCEL0=1`).
+/// record's 3 %), ωy² came out +0.006–0.009 ppm on clean devices at 0.1 pm/√Hz, a mean z
+/// of +11 (`examples/clean 200 8` with `NOISE_PM=0.1 TEMP_RISE_K=0 ACCEL0=1`); this
+/// device read +9.3σ.
 #[test]
 fn a_simulated_records_own_integrator_grid_leaves_no_wy2_bias() {
     let sc = Scenario::load("characterise").unwrap();
