@@ -417,9 +417,9 @@ pub(crate) fn with_lockin(rec: &Record, li: &[LockinOut]) -> Record {
 /// RK4 grid, the same dispersion, which cancels), else the record's largest pump frequency
 /// with a 1 % margin.
 fn sim_grid(h: &paragyro_simulator::record::RecordHeader, pump_max: f64) -> f64 {
-    let from_pump = (pump_max / (2.0 * h.f0_hz) * 1.01).max(0.5);
+    let w_pump = pump_max / (2.0 * h.f0_hz);
     h.extra_value(paragyro_simulator::record::SIM_OMEGA_MAX_KEY)
         .and_then(|v| v.parse::<f64>().ok())
-        .filter(|w| w.is_finite() && *w >= pump_max / (2.0 * h.f0_hz) && *w <= 4.0)
-        .unwrap_or(from_pump)
+        .filter(|w| w.is_finite() && *w >= w_pump && *w <= 4.0)
+        .unwrap_or((w_pump * 1.01).max(0.5))
 }
