@@ -146,6 +146,14 @@ pub struct RateConfig {
     /// … and while the narrow channel's rate differs from the slow RLS's by more than
     /// this, °/s (a slow move of the rate the slow RLS would otherwise chase).
     pub gate_dev_dps: f64,
+    /// The slow RLS's rate term is a random walk of this standard deviation per sample,
+    /// °/s: process noise on the sense θ24 (and, as the sense sees it move, on the drive
+    /// θ14), so that a moving rate neither biases the other slow θ nor fires the change
+    /// detector (README, "Rate channel"). 0: the rate is a constant of the slow RLS.
+    pub walk_dps: f64,
+    /// The walk stops while the rate term's standard deviation is above this, °/s
+    /// (start-up, after a covariance reset).
+    pub walk_cap_dps: f64,
 }
 
 /// The whole configuration.
@@ -260,6 +268,8 @@ impl Config {
                 gate_accel_dps2: 2000.0,
                 gate_s: 0.3,
                 gate_dev_dps: 1.0,
+                walk_dps: 0.3,
+                walk_cap_dps: 20.0,
             },
         }
     }
@@ -507,7 +517,9 @@ impl RateConfig {
         pos(self.full_scale_dps, "rate.full_scale_dps")?;
         pos(self.gate_accel_dps2, "rate.gate_accel_dps2")?;
         nonneg(self.gate_s, "rate.gate_s")?;
-        pos(self.gate_dev_dps, "rate.gate_dev_dps")
+        pos(self.gate_dev_dps, "rate.gate_dev_dps")?;
+        nonneg(self.walk_dps, "rate.walk_dps")?;
+        pos(self.walk_cap_dps, "rate.walk_cap_dps")
     }
 }
 

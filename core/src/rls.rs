@@ -668,6 +668,44 @@ impl<T: Real, const N: usize> Rls<T, N> {
         self.stats.resets = self.stats.resets.saturating_add(1);
     }
 
+    /// Process noise on one parameter: `P ← P + q·e_j e_jᵀ` (a random walk of variance `q`
+    /// per call on parameter `j`, the Kalman filter's time update for that parameter),
+    /// unless `P_jj ≥ cap` already. An Agee–Turner rank-one update of the UD factors:
+    /// only `D_0..=j` and the columns `1..=j` of `U` above the diagonal change, every
+    /// `D_k` grows, so `P` stays positive definite; ≈ 3j + j² multiply-adds and `j`
+    /// divisions. Returns whether it walked: a `q` that is not finite and > 0, a `j ≥ N`,
+    /// or `P_jj ≥ cap` (or NaN) changes nothing. The estimate is not touched.
+    pub fn add_walk(&mut self, j: usize, q: T, cap: T) -> bool {
+        if !(q > T::ZERO && q.is_finite()) || j >= N {
+            return false;
+        }
+        // P_jj = Σ_{k ≥ j} U[j][k]²·D[k]: no walk once the parameter's variance is at the cap
+        let mut pjj = T::ZERO;
+        for k in j..N {
+            pjj += self.u[j][k] * self.u[j][k] * self.d[k];
+        }
+        if !(pjj < cap) {
+            return false;
+        }
+        // v = e_j: the entries above j start at 0 and pick up −U[i][k]·v_k on the way down
+        let mut v = [T::ZERO; N];
+        v[j] = T::ONE;
+        let mut c = q;
+        for k in (1..=j).rev() {
+            let s = v[k];
+            let dn = self.d[k] + c * s * s;
+            let b = c * s / dn;
+            c = c * self.d[k] / dn;
+            self.d[k] = dn;
+            for i in 0..k {
+                v[i] -= s * self.u[i][k];
+                self.u[i][k] += b * v[i];
+            }
+        }
+        self.d[0] += c * v[0] * v[0];
+        true
+    }
+
     /// Replaces the estimate (e.g. after re-centring the nominal θ); the covariance is
     /// kept. Returns `false` and changes nothing if any entry is NaN or ±∞.
     pub fn set_estimate(&mut self, x: [T; N]) -> bool {

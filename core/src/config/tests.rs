@@ -126,6 +126,10 @@ const FIELDS: &[(&str, Rule, Setter)] = &[
     ("retune.min_interval_s", Rule::NonNeg, |c, v| {
         c.retune.min_interval_s = v
     }),
+    ("rate.walk_dps", Rule::NonNeg, |c, v| c.rate.walk_dps = v),
+    ("rate.walk_cap_dps", Rule::Pos, |c, v| {
+        c.rate.walk_cap_dps = v
+    }),
 ];
 
 /// A value that breaks `rule`: NaN, ±∞, or a finite value out of its range.

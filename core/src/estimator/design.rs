@@ -160,6 +160,13 @@ pub(crate) struct Fit<T> {
     pub relin_every: u64,
     /// The change detector of both axes.
     pub change: ChangeDesign<T>,
+    /// The sense θ24's random walk per sample, a variance in scaled units
+    /// (`rate.walk_dps`; 0: the rate is a constant of the slow RLS).
+    pub walk2: T,
+    /// The walks stop while the rate term's variance is above this (`rate.walk_cap_dps`,
+    /// drive θ14 and sense θ24 in their scaled units).
+    pub walk_cap1: T,
+    pub walk_cap2: T,
 }
 
 impl<T: Real> Fit<T> {
@@ -168,6 +175,12 @@ impl<T: Real> Fit<T> {
         let (th1n, th2n) = theta_from_physical(&cfg.nominal);
         let m = &cfg.monitor;
         let hold = samples_at(m.change_hold_s, cfg.fs_hz).max(1);
+        // a rate of `dps` moves θ14, θ24 by 2γ, γ = dps/(ω0·180/π) = dps/(360·f0); the
+        // variance in the column's scaled units
+        let walk = |th: f64, dps: f64| {
+            let s = 2.0 * dps / (360.0 * cfg.f0_hz) / libm::fabs(th);
+            if s.is_finite() { s * s } else { 0.0 }
+        };
         let w1: [f64; NROWS] =
             core::array::from_fn(|r| 1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz));
         let w2: [f64; NROWS] =
@@ -190,6 +203,9 @@ impl<T: Real> Fit<T> {
             trace_max2: T::from_f64(cfg.rls.p0 * 6.0 * 10.0),
             relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
             change: ChangeDesign::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
+            walk2: T::from_f64(walk(th2n[3], cfg.rate.walk_dps)),
+            walk_cap1: T::from_f64(walk(th1n[3], cfg.rate.walk_cap_dps)),
+            walk_cap2: T::from_f64(walk(th2n[3], cfg.rate.walk_cap_dps)),
         }
     }
 }

@@ -129,6 +129,8 @@ pub(crate) struct State<T: Real> {
     pub bad_gate_until: u64,
     /// Sample of the last covariance reset.
     pub last_reset: u64,
+    /// The sense's θ24 at the last update (the rate walk carries its moves to θ14).
+    pub walk_prev24: Option<T>,
     /// A warm start's first settle is due: the settle window counts from the end of the
     /// start-up gate (`persist`); cleared by that settle and by any reset.
     pub warm_first: bool,
@@ -174,6 +176,7 @@ impl<T: Real> State<T> {
             jump_gate_until: 0,
             bad_gate_until: 0,
             last_reset: 0,
+            walk_prev24: None,
             warm_first: false,
             change_pending: false,
             bound_learned: false,
@@ -217,6 +220,7 @@ impl<T: Real> State<T> {
             jump_gate_until,
             bad_gate_until,
             last_reset,
+            walk_prev24,
             warm_first,
             change_pending,
             bound_learned,
@@ -234,6 +238,7 @@ impl<T: Real> State<T> {
         *lin = Linearisation::default();
         lin.move_to(th1n, th2n);
         *rate = RateState::new(&d.rate);
+        *walk_prev24 = None;
         *stuck = StuckDetector::default();
         *det1 = ChangeDetector::new(&d.fit.change);
         *det2 = ChangeDetector::new(&d.fit.change);

@@ -215,6 +215,7 @@ impl<T: Real> State<T> {
             self.rls1.begin_sample();
             self.rls2.begin_sample();
         }
+        self.walk_rate(f);
         let rows = &self.last_rows;
         let mut sum1 = T::ZERO;
         let mut sum2 = T::ZERO;
@@ -242,6 +243,27 @@ impl<T: Real> State<T> {
             self.change_pending = true;
             self.settle.clear();
             self.lift_trace_bound(d);
+        }
+    }
+
+    /// Stage 4a: the rate as a random walk of the slow RLS (`rate.walk_dps`). The sense's
+    /// θ24 takes the walk's variance; the drive's θ14, which the rate moves by the
+    /// opposite amount but its rows resolve ~6× less well, takes as its variance the
+    /// square of the sense θ24's move since the last update, so it follows the rate only
+    /// when the rate moves (a constant walk let θ14, and with it μ̂xy and the fast rate,
+    /// wander on `characterise`'s ring-downs). Neither walks while its variance is above
+    /// `rate.walk_cap_dps` (start-up, a covariance reset), nor the drive then.
+    #[inline(always)]
+    fn walk_rate(&mut self, f: &super::design::Fit<T>) {
+        if self.rls2.add_walk(3, f.walk2, f.walk_cap2) {
+            let th24 = self.lin.th24n + f.sc2[3] * self.rls2.estimate()[3];
+            if let Some(prev) = self.walk_prev24 {
+                let m = (th24 - prev) / f.sc1[3];
+                self.rls1.add_walk(3, m * m, f.walk_cap1);
+            }
+            self.walk_prev24 = Some(th24);
+        } else {
+            self.walk_prev24 = None;
         }
     }
 

@@ -870,3 +870,41 @@ fn held_sample_on_zero_rows_changes_nothing_but_the_count() {
     }
     assert!(forgetting.trace() > 2.0 * rls.trace());
 }
+
+/// `add_walk` is `P + q·e_j e_jᵀ` exactly (against the dense covariance, after updates
+/// that fill U), leaves the estimate alone, and does nothing at or above its cap or for a
+/// bad `q` or `j`.
+#[test]
+fn add_walk_adds_q_on_one_diagonal_entry_below_its_cap() {
+    let mut rng = Rng::new(17);
+    let mut rls: Rls<f64, 6> = Rls::new(unbounded(0.999, 10.0));
+    for _ in 0..40 {
+        rls.begin_sample();
+        let phi: [f64; 6] = core::array::from_fn(|_| rng.uni());
+        rls.update(&phi, rng.gauss());
+    }
+    for j in [0, 3, 5] {
+        let (p, x) = (rls.covariance(), rls.estimate());
+        let q = 0.25 * p[j][j];
+        assert!(rls.add_walk(j, q, f64::INFINITY));
+        let p2 = rls.covariance();
+        let mut err = 0.0_f64;
+        for r in 0..6 {
+            for c in 0..6 {
+                let want = p[r][c] + if r == j && c == j { q } else { 0.0 };
+                err = err.max((p2[r][c] - want).abs() / p[j][j]);
+            }
+        }
+        assert!(err < 1e-12, "j = {j}: relative error {err:e}");
+        assert_eq!(rls.estimate(), x);
+    }
+    let before = rls.covariance();
+    let pjj = before[3][3];
+    assert!(!rls.add_walk(3, 1.0, pjj), "at its cap");
+    assert!(!rls.add_walk(3, f64::NAN, f64::INFINITY));
+    assert!(!rls.add_walk(3, -1.0, f64::INFINITY));
+    assert!(!rls.add_walk(3, 0.0, f64::INFINITY));
+    assert!(!rls.add_walk(6, 1.0, f64::INFINITY));
+    assert_eq!(rls.covariance(), before);
+    assert!(rls.add_walk(3, 1.0, pjj * 1.01), "below its cap");
+}

@@ -73,6 +73,9 @@ pub fn core_config(sc: &Scenario) -> Config {
         c_ay: 1.0,
     };
     c.pump_centre_hz = sc.pump_centre_hz();
+    if let Some(w) = sc.estimator.rate_walk_dps {
+        c.rate.walk_dps = w;
+    }
     c.dither.pump_hz = sc.estimator.dither_pump_hz;
     c.dither.freq_hz = sc.estimator.dither_freq_hz;
     c.dither.start_s = sc.estimator.dither_start_s;

@@ -48,6 +48,9 @@ pub(crate) fn model_config(rec: &Record, model: &Model, gamma: f64) -> Config {
     // the gate fires on the drive's ring-downs at s = 1.15 (|x1| < 1.3 µm, the narrow
     // rate 138–166 °/s for a true 150), 5–7 times in the held-out span.
     cfg.rate.gate_s = 0.0;
+    // the rate a constant of the fit, as the model's rows have it (the rate walk only
+    // moves the pass's RLS estimate, not its rows)
+    cfg.rate.walk_dps = 0.0;
     cfg
 }
 

@@ -344,6 +344,9 @@ pub struct EstimatorSpec {
     pub retune: bool,
     /// Duration of the pump-centre ramp of a retune, s.
     pub retune_ramp_s: f64,
+    /// The slow RLS's rate random walk per sample, °/s (core `rate.walk_dps`); `None`:
+    /// the core's default.
+    pub rate_walk_dps: Option<f64>,
     /// Nominal (design) parameters.
     pub nominal: NominalSpec,
 }
@@ -361,6 +364,7 @@ impl Default for EstimatorSpec {
             gate_startup_s: 0.5,
             retune: true,
             retune_ramp_s: 0.5,
+            rate_walk_dps: None,
             nominal: NominalSpec::default(),
         }
     }

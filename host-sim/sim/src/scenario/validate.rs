@@ -83,6 +83,9 @@ impl Scenario {
         non_negative(est.dither_start_s, path(&["estimator", "dither_start_s"]))?;
         non_negative(est.gate_startup_s, path(&["estimator", "gate_startup_s"]))?;
         non_negative(est.retune_ramp_s, path(&["estimator", "retune_ramp_s"]))?;
+        if let Some(w) = est.rate_walk_dps {
+            non_negative(w, path(&["estimator", "rate_walk_dps"]))?;
+        }
         for (k, v) in est.nominal.entries() {
             finite(v, path(&["estimator", "nominal", k]))?;
         }
