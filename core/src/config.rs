@@ -151,9 +151,6 @@ pub struct RateConfig {
     /// θ14), so that a moving rate neither biases the other slow θ nor fires the change
     /// detector (README, "Rate channel"). 0: the rate is a constant of the slow RLS.
     pub walk_dps: f64,
-    /// The walk stops while the rate term's standard deviation is above this, °/s
-    /// (start-up, after a covariance reset).
-    pub walk_cap_dps: f64,
 }
 
 /// The whole configuration.
@@ -269,7 +266,6 @@ impl Config {
                 gate_s: 0.3,
                 gate_dev_dps: 1.0,
                 walk_dps: 0.3,
-                walk_cap_dps: 20.0,
             },
         }
     }
@@ -518,8 +514,7 @@ impl RateConfig {
         pos(self.gate_accel_dps2, "rate.gate_accel_dps2")?;
         nonneg(self.gate_s, "rate.gate_s")?;
         pos(self.gate_dev_dps, "rate.gate_dev_dps")?;
-        nonneg(self.walk_dps, "rate.walk_dps")?;
-        pos(self.walk_cap_dps, "rate.walk_cap_dps")
+        nonneg(self.walk_dps, "rate.walk_dps")
     }
 }
 

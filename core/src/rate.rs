@@ -56,12 +56,14 @@
 //!   RLS is gated (no update, no detector), and for `rate.gate_s` after — provided its
 //!   quadrature agrees with the slow θ23 to the same tolerance: a drift of the device
 //!   (ωy², damping) moves both directions of the row and is left to the slow RLS;
-//! * at the end of such a transient the slow linearisation point takes the new rate from
-//!   the narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 averaged over the quiet time minus
-//!   the slow θ24), so the slow rows continue consistent instead of seeing a step.
-//!
-//! Slow rate moves (below the acceleration threshold) are still followed by the slow RLS
-//! as before.
+//! * the slow RLS's rate term is a random walk (`rate.walk_dps`, 0.3 °/s per sample,
+//!   `estimator/step.rs` `walk_rate`): the sense θ24 takes that process noise every
+//!   update, the drive θ14 the square of the sense θ24's move, so between and after gates
+//!   the slow rows follow the rate instead of seeing a step. This replaced a hand-over
+//!   (the linearisation point moved by θ24 + Δ, θ14 − Δ at the end of each gate, Δ from
+//!   the narrow channel), with the same step, chirp and ramp results (README, "Rate
+//!   channel"), and it also lets the slow RLS re-identify a drift while the rate moves,
+//!   which the hand-over did not.
 //!
 //! # Validity
 //!
@@ -120,8 +122,6 @@ pub struct RateDesign<T> {
     bias: Curvature<T>,
     /// The narrow channel's filter (corner `rate.coupling_hz`).
     svf_cpl: SvfCoeffs<T>,
-    /// The narrow channel's θ24 is averaged over the last `quiet_len` samples of a gate.
-    quiet_len: u64,
     /// θ23 and γ of the design's nominal (the outputs before the first solution).
     th23_ref: T,
     gamma_ref: T,
@@ -166,7 +166,6 @@ impl<T: Real> RateDesign<T> {
             svf: SvfCoeffs::new(wf, ts),
             bias: Curvature::of(parabola_bias::<T>(wf, ts)),
             svf_cpl: SvfCoeffs::new(wc, ts),
-            quiet_len: (libm::round(cfg.rate.gate_s * cfg.fs_hz / 3.0) as u64).max(1),
             th23_ref: T::from_f64(th2[2]),
             gamma_ref: T::from_f64(cfg.nominal.gamma),
             to_dps,
@@ -186,6 +185,11 @@ impl<T: Real> RateDesign<T> {
     /// γ → °/s.
     pub fn to_dps(&self) -> f64 {
         self.to_dps
+    }
+
+    /// γ → °/s in `T`.
+    pub(crate) fn to_dps_t(&self) -> T {
+        self.to_dps_t
     }
 }
 
@@ -323,19 +327,14 @@ pub struct RateState<T> {
     started: bool,
     nom: NominalSlow<T>,
     est: RateEstimate<T>,
-    /// The narrow channel's last γ (its derivative is γ′), and the sum and count of its
-    /// θ24 over the last third of a gate.
+    /// The narrow channel's last γ (its derivative is γ′).
     gamma_cpl: T,
-    quiet_sum: T,
-    quiet_n: u32,
     /// The first solution has been made (the derivative starts from it).
     primed: bool,
     /// Slow mean of |A1|² over solved samples (the steadiness test).
     amp2_slow: T,
-    /// The slow RLS is gated until this sample (the rate accelerated); the hand-over of
-    /// the new rate is due when the gate ends.
+    /// The slow RLS is gated until this sample (the rate accelerated).
     gate_until: u64,
-    handover_due: bool,
     /// The slow identification has settled once since start-up.
     settled_once: bool,
     /// The narrow channel's quadrature agrees with the slow θ23 (this sample).
@@ -482,40 +481,12 @@ impl<T: Real> RateState<T> {
         self.quad_ok = quad_ok;
         if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
-            self.handover_due = true;
-        }
-        // the average over the gate's last third (restarted whenever the gate moves)
-        if self.handover_due && k < self.gate_until {
-            if self.gate_until - k > d.quiet_len {
-                self.quiet_sum = T::ZERO;
-                self.quiet_n = 0;
-            } else {
-                self.quiet_sum += t24c;
-                self.quiet_n += 1;
-            }
         }
     }
 
     /// The slow RLS must not update at sample `k` (the rate is moving fast).
     pub fn gates(&self, k: u64) -> bool {
         k < self.gate_until
-    }
-
-    /// At the first sample after a rate transient: the change of θ24 the slow
-    /// linearisation point must take (the narrow channel's θ24 averaged over the quiet
-    /// time minus the slow θ24 `th24_slow`), once.
-    pub fn take_handover(&mut self, k: u64, th24_slow: T) -> Option<T> {
-        if self.handover_due && k >= self.gate_until {
-            self.handover_due = false;
-            if self.quiet_n > 0 {
-                let mean = self.quiet_sum / T::from_f64(self.quiet_n as f64);
-                let delta = mean - th24_slow;
-                if delta.is_finite() {
-                    return Some(delta);
-                }
-            }
-        }
-        None
     }
 
     /// The validity of this sample's rate (module docs), given the health of the step.

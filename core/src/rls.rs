@@ -671,15 +671,16 @@ impl<T: Real, const N: usize> Rls<T, N> {
     /// Process noise on one parameter: `P ← P + q·e_j e_jᵀ` (a random walk of variance `q`
     /// per call on parameter `j`, the Kalman filter's time update for that parameter),
     /// unless `P_jj ≥ cap` already. An Agee–Turner rank-one update of the UD factors:
-    /// only `D_0..=j` and the columns `1..=j` of `U` above the diagonal change, every
-    /// `D_k` grows, so `P` stays positive definite; ≈ 3j + j² multiply-adds and `j`
-    /// divisions. Returns whether it walked: a `q` that is not finite and > 0, a `j ≥ N`,
-    /// or `P_jj ≥ cap` (or NaN) changes nothing. The estimate is not touched.
+    /// only `D_0..=j` and the columns `1..=j` of `U` above the diagonal change and every
+    /// `D_k` grows, so `P` stays positive definite; `j` divisions, ≈ j² multiply-adds.
+    /// Returns whether it walked: a `q` that is not finite and > 0, a `j` ≥ min(N,
+    /// [`WALK_J_MAX`] + 1), or `P_jj ≥ cap` (or NaN) changes nothing. The estimate is not
+    /// touched.
     pub fn add_walk(&mut self, j: usize, q: T, cap: T) -> bool {
-        if !(q > T::ZERO && q.is_finite()) || j >= N {
+        if !(q > T::ZERO && q.is_finite()) || j >= N || j > WALK_J_MAX {
             return false;
         }
-        // P_jj = Σ_{k ≥ j} U[j][k]²·D[k]: no walk once the parameter's variance is at the cap
+        // P_jj = Σ_{k ≥ j} U[j][k]²·D[k]
         let mut pjj = T::ZERO;
         for k in j..N {
             pjj += self.u[j][k] * self.u[j][k] * self.d[k];
@@ -687,22 +688,23 @@ impl<T: Real, const N: usize> Rls<T, N> {
         if !(pjj < cap) {
             return false;
         }
-        // v = e_j: the entries above j start at 0 and pick up −U[i][k]·v_k on the way down
-        let mut v = [T::ZERO; N];
-        v[j] = T::ONE;
-        let mut c = q;
-        for k in (1..=j).rev() {
-            let s = v[k];
-            let dn = self.d[k] + c * s * s;
-            let b = c * s / dn;
-            c = c * self.d[k] / dn;
-            self.d[k] = dn;
-            for i in 0..k {
-                v[i] -= s * self.u[i][k];
-                self.u[i][k] += b * v[i];
-            }
-        }
-        self.d[0] += c * v[0] * v[0];
+        // the update reads and writes the leading 4×4 block only: one copy of its code
+        // for every N (the chip's flash)
+        let Some(d) = self.d.first_chunk_mut::<4>() else {
+            return false;
+        };
+        let [r0, r1, r2, r3, ..] = &mut self.u[..] else {
+            return false;
+        };
+        let (Some(u0), Some(u1), Some(u2), Some(u3)) = (
+            r0.first_chunk_mut::<4>(),
+            r1.first_chunk_mut::<4>(),
+            r2.first_chunk_mut::<4>(),
+            r3.first_chunk_mut::<4>(),
+        ) else {
+            return false;
+        };
+        agee_turner_unit(&mut [u0, u1, u2, u3], d, j, q);
         true
     }
 
@@ -846,5 +848,35 @@ fn residual<T: Real, const N: usize>(y: T, phi: &[T; N], x: &[T; N]) -> T {
 
 #[cfg(test)]
 mod props;
+
+/// The largest parameter index [`Rls::add_walk`] takes (its update works on the leading
+/// 4×4 block of the UD factors; the estimator walks θ14 and θ24, index 3).
+pub const WALK_J_MAX: usize = 3;
+
+/// `U D Uᵀ + q e_j e_jᵀ` on the leading 4×4 block (Agee–Turner with `v = e_j`: the
+/// entries of `v` above `j` start at 0 and pick up `−U[i][k]·v_k` on the way down).
+#[inline(never)]
+fn agee_turner_unit<T: Real>(u: &mut [&mut [T; 4]; 4], d: &mut [T; 4], j: usize, q: T) {
+    let mut v = [T::ZERO; 4];
+    let mut c = q;
+    for k in (1..4).rev() {
+        if k > j {
+            continue;
+        }
+        let s = if k == j { T::ONE } else { v[k] };
+        let dn = d[k] + c * s * s;
+        let inv = T::ONE / dn;
+        let b = c * s * inv;
+        c = c * d[k] * inv;
+        d[k] = dn;
+        for i in 0..k {
+            v[i] -= s * u[i][k];
+            u[i][k] += b * v[i];
+        }
+    }
+    let s = if j == 0 { T::ONE } else { v[0] };
+    d[0] += c * s * s;
+}
+
 #[cfg(test)]
 mod tests;

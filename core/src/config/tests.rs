@@ -127,9 +127,6 @@ const FIELDS: &[(&str, Rule, Setter)] = &[
         c.retune.min_interval_s = v
     }),
     ("rate.walk_dps", Rule::NonNeg, |c, v| c.rate.walk_dps = v),
-    ("rate.walk_cap_dps", Rule::Pos, |c, v| {
-        c.rate.walk_cap_dps = v
-    }),
 ];
 
 /// A value that breaks `rule`: NaN, ±∞, or a finite value out of its range.

@@ -134,6 +134,11 @@ impl<T: Real> Watch<T> {
     }
 }
 
+/// The rate walk (`rate.walk_dps`) stops while the rate term's standard deviation is
+/// above this, °/s: at start-up and after a covariance reset (p_reset = 1 is ≈ 200 °/s
+/// with the Table 2 design), until the slow RLS knows the rate again.
+pub const WALK_CAP_DPS: f64 = 20.0;
+
 /// The regression: column scales, row weights, the RLS limits, the change detector and
 /// the re-linearisation interval.
 #[derive(Clone, Copy, Debug, Default)]
@@ -163,7 +168,7 @@ pub(crate) struct Fit<T> {
     /// The sense θ24's random walk per sample, a variance in scaled units
     /// (`rate.walk_dps`; 0: the rate is a constant of the slow RLS).
     pub walk2: T,
-    /// The walks stop while the rate term's variance is above this (`rate.walk_cap_dps`,
+    /// The walks stop while the rate term's variance is above this ([`WALK_CAP_DPS`],
     /// drive θ14 and sense θ24 in their scaled units).
     pub walk_cap1: T,
     pub walk_cap2: T,
@@ -175,12 +180,6 @@ impl<T: Real> Fit<T> {
         let (th1n, th2n) = theta_from_physical(&cfg.nominal);
         let m = &cfg.monitor;
         let hold = samples_at(m.change_hold_s, cfg.fs_hz).max(1);
-        // a rate of `dps` moves θ14, θ24 by 2γ, γ = dps/(ω0·180/π) = dps/(360·f0); the
-        // variance in the column's scaled units
-        let walk = |th: f64, dps: f64| {
-            let s = 2.0 * dps / (360.0 * cfg.f0_hz) / libm::fabs(th);
-            if s.is_finite() { s * s } else { 0.0 }
-        };
         let w1: [f64; NROWS] =
             core::array::from_fn(|r| 1.0 / (cfg.row_sigma_drive[r] * cfg.noise_pm_rthz));
         let w2: [f64; NROWS] =
@@ -203,9 +202,9 @@ impl<T: Real> Fit<T> {
             trace_max2: T::from_f64(cfg.rls.p0 * 6.0 * 10.0),
             relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
             change: ChangeDesign::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
-            walk2: T::from_f64(walk(th2n[3], cfg.rate.walk_dps)),
-            walk_cap1: T::from_f64(walk(th1n[3], cfg.rate.walk_cap_dps)),
-            walk_cap2: T::from_f64(walk(th2n[3], cfg.rate.walk_cap_dps)),
+            walk2: T::ZERO,
+            walk_cap1: T::ZERO,
+            walk_cap2: T::ZERO,
         }
     }
 }
@@ -271,5 +270,16 @@ impl<T: Real> Design<T> {
         *rows = RowDesign::new(w_svf, ts);
         *rate = RateDesign::of(cfg);
         *fit = Fit::of(cfg);
+        // the rate walk and its cap as variances of θ14, θ24 in their scaled units: a rate
+        // of `dps` moves them by 2γ, γ = dps/to_dps; in `T` (an `f64` chain here cost
+        // ≈ 250 B of soft-float calls in the firmware image). A zero scale gives +∞,
+        // which `Rls::add_walk` refuses.
+        let two_per_dps = T::from_f64(2.0) / rate.to_dps_t();
+        let w = T::from_f64(cfg.rate.walk_dps) * two_per_dps;
+        let c = T::from_f64(WALK_CAP_DPS) * two_per_dps;
+        let (s1, s2) = (fit.sc1[3], fit.sc2[3]);
+        fit.walk2 = (w / s2) * (w / s2);
+        fit.walk_cap1 = (c / s1) * (c / s1);
+        fit.walk_cap2 = (c / s2) * (c / s2);
     }
 }

@@ -56,15 +56,14 @@ impl<T: Real> State<T> {
         let gated = k < d.watch.gate_startup
             || k < self.jump_gate_until
             || k < self.bad_gate_until
-            || self.rate.gates(k)
-            || self.lin.pending.handover_pending();
+            || self.rate.gates(k);
         let updated = !gated && good;
         if updated {
             self.update(d, k, hold, &mut events);
         }
         let wy2 = self.wy2_fast(d);
         let settled = self.settle(d, k, gated, updated, wy2, &mut events);
-        self.maybe_relinearize(d, k, updated, good);
+        self.maybe_relinearize(d, k, updated);
         let health = self.assess(d, good, gated, settled, excited, pump_scale);
         let drive_amp = env.a[0].abs();
         let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
@@ -172,8 +171,8 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 3a: the fast rate channel on this sample, given the slow θ of the last
-    /// update (module `rate`); at the end of a rate transient the slow linearisation
-    /// point takes the new rate (θ24 + Δ, θ14 − Δ).
+    /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves
+    /// fast.
     #[inline(always)]
     fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>) {
         self.rate
@@ -193,11 +192,6 @@ impl<T: Real> State<T> {
             &th,
             (self.k, slow_ok),
         );
-        // the new point: θ24 + Δ, θ14 − Δ (a new rate, μxy unchanged), spread over four
-        // ticks like a re-linearisation (relin.rs), the slow RLS gated until the swap
-        if let Some(delta) = self.rate.take_handover(self.k, th.th24) {
-            self.lin.pending.request_handover(delta.to_f64());
-        }
     }
 
     /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns
@@ -215,7 +209,7 @@ impl<T: Real> State<T> {
             self.rls1.begin_sample();
             self.rls2.begin_sample();
         }
-        self.walk_rate(f);
+        self.walk_rate(f, k);
         let rows = &self.last_rows;
         let mut sum1 = T::ZERO;
         let mut sum2 = T::ZERO;
@@ -247,23 +241,29 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 4a: the rate as a random walk of the slow RLS (`rate.walk_dps`). The sense's
-    /// θ24 takes the walk's variance; the drive's θ14, which the rate moves by the
-    /// opposite amount but its rows resolve ~6× less well, takes as its variance the
-    /// square of the sense θ24's move since the last update, so it follows the rate only
-    /// when the rate moves (a constant walk let θ14, and with it μ̂xy and the fast rate,
-    /// wander on `characterise`'s ring-downs). Neither walks while its variance is above
-    /// `rate.walk_cap_dps` (start-up, a covariance reset), nor the drive then.
+    /// θ24 takes the walk's variance every update; the drive's θ14, which the rate moves
+    /// by the opposite amount but its rows resolve ~6× less well, takes as its variance
+    /// the square of the sense θ24's move since its last walk, so it follows the rate as
+    /// far as the rate moves (a constant walk let θ14, and with it μ̂xy and the fast rate,
+    /// wander on `characterise`'s ring-downs); it walks every other sample (the chip's
+    /// tick budget; the sense walking every other sample with twice the variance failed
+    /// `drift-retune-rate-sine`, the drive doing so changed nothing measured). Neither
+    /// walks while the sense θ24's variance is above [`WALK_CAP_DPS`] (start-up, a
+    /// covariance reset), and the drive not above it either.
+    ///
+    /// [`WALK_CAP_DPS`]: super::design::WALK_CAP_DPS
     #[inline(always)]
-    fn walk_rate(&mut self, f: &super::design::Fit<T>) {
-        if self.rls2.add_walk(3, f.walk2, f.walk_cap2) {
+    fn walk_rate(&mut self, f: &super::design::Fit<T>, k: u64) {
+        self.walk_on = self.rls2.add_walk(3, f.walk2, f.walk_cap2);
+        if !self.walk_on {
+            self.walk_prev24 = None;
+        } else if k & 1 == 1 {
             let th24 = self.lin.th24n + f.sc2[3] * self.rls2.estimate()[3];
             if let Some(prev) = self.walk_prev24 {
                 let m = (th24 - prev) / f.sc1[3];
                 self.rls1.add_walk(3, m * m, f.walk_cap1);
             }
             self.walk_prev24 = Some(th24);
-        } else {
-            self.walk_prev24 = None;
         }
     }
 
@@ -306,11 +306,10 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate, and a requested rate hand-over happens, spread over four
-    /// ticks (`relin.rs`).
+    /// a moderate estimate, spread over four ticks (`relin.rs`).
     #[inline(always)]
-    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool, good: bool) {
-        self.relin_tick(d, k, updated, good);
+    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
+        self.relin_tick(d, k, updated);
     }
 
     /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp

@@ -873,7 +873,7 @@ fn held_sample_on_zero_rows_changes_nothing_but_the_count() {
 
 /// `add_walk` is `P + q·e_j e_jᵀ` exactly (against the dense covariance, after updates
 /// that fill U), leaves the estimate alone, and does nothing at or above its cap or for a
-/// bad `q` or `j`.
+/// bad `q` or `j` (beyond [`WALK_J_MAX`] or `N`).
 #[test]
 fn add_walk_adds_q_on_one_diagonal_entry_below_its_cap() {
     let mut rng = Rng::new(17);
@@ -883,7 +883,7 @@ fn add_walk_adds_q_on_one_diagonal_entry_below_its_cap() {
         let phi: [f64; 6] = core::array::from_fn(|_| rng.uni());
         rls.update(&phi, rng.gauss());
     }
-    for j in [0, 3, 5] {
+    for j in [0, 1, 2, 3] {
         let (p, x) = (rls.covariance(), rls.estimate());
         let q = 0.25 * p[j][j];
         assert!(rls.add_walk(j, q, f64::INFINITY));
@@ -904,6 +904,7 @@ fn add_walk_adds_q_on_one_diagonal_entry_below_its_cap() {
     assert!(!rls.add_walk(3, f64::NAN, f64::INFINITY));
     assert!(!rls.add_walk(3, -1.0, f64::INFINITY));
     assert!(!rls.add_walk(3, 0.0, f64::INFINITY));
+    assert!(!rls.add_walk(WALK_J_MAX + 1, 1.0, f64::INFINITY));
     assert!(!rls.add_walk(6, 1.0, f64::INFINITY));
     assert_eq!(rls.covariance(), before);
     assert!(rls.add_walk(3, 1.0, pjj * 1.01), "below its cap");
