@@ -56,14 +56,19 @@
 //!   RLS is gated (no update, no detector), and for `rate.gate_s` after — provided its
 //!   quadrature agrees with the slow θ23 to the same tolerance: a drift of the device
 //!   (ωy², damping) moves both directions of the row and is left to the slow RLS;
+//! * at the end of such a transient the slow RLS's estimate takes the new rate from the
+//!   narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 minus the slow θ24), so the slow rows
+//!   continue consistent instead of seeing a step, and the gate, which the departure
+//!   would otherwise hold for ever, ends;
 //! * the slow RLS's rate term is a random walk (`rate.walk_dps`, 0.3 °/s per sample,
 //!   `estimator/step.rs` `walk_rate`): the sense θ24 takes that process noise every
-//!   update, the drive θ14 the square of the sense θ24's move, so between and after gates
-//!   the slow rows follow the rate instead of seeing a step. This replaced a hand-over
-//!   (the linearisation point moved by θ24 + Δ, θ14 − Δ at the end of each gate, Δ from
-//!   the narrow channel), with the same step, chirp and ramp results (README, "Rate
-//!   channel"), and it also lets the slow RLS re-identify a drift while the rate moves,
-//!   which the hand-over did not.
+//!   update, the drive θ14 the square of the sense θ24's move, so between gates the slow
+//!   rows follow the rate, and the slow RLS re-identifies a drift while the rate moves,
+//!   which it did not before the walk (README, "Rate channel"). With the walk the
+//!   hand-over moves the estimate directly: it used to move the linearisation point
+//!   through the spread re-linearisation (four ticks, the slow RLS gated until the swap),
+//!   which the flash and the tick budget no longer leave room for; the same step, chirp and
+//!   ramp results.
 //!
 //! # Validity
 //!
@@ -333,8 +338,11 @@ pub struct RateState<T> {
     primed: bool,
     /// Slow mean of |A1|² over solved samples (the steadiness test).
     amp2_slow: T,
-    /// The slow RLS is gated until this sample (the rate accelerated).
+    /// The slow RLS is gated until this sample (the rate moved).
     gate_until: u64,
+    /// The rate moved (fast, or away from the slow RLS's) less than a gate's length ago,
+    /// whether or not the slow RLS is gated: the slow RLS's rate walks until this sample.
+    moving_until: u64,
     /// The slow identification has settled once since start-up.
     settled_once: bool,
     /// The narrow channel's quadrature agrees with the slow θ23 (this sample).
@@ -477,11 +485,20 @@ impl<T: Real> RateState<T> {
         // with the slow θ23: a drift of the device (ωy², damping) shows in both
         // directions of the row and is left to the slow RLS
         let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
+        if moved {
+            self.moving_until = k + d.gate_len;
+        }
         let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
         self.quad_ok = quad_ok;
         if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
         }
+    }
+
+    /// The rate moved less than a gate's length before sample `k` (the slow RLS's rate
+    /// walks).
+    pub fn moving(&self, k: u64) -> bool {
+        k < self.moving_until
     }
 
     /// The slow RLS must not update at sample `k` (the rate is moving fast).

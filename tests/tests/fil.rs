@@ -161,16 +161,23 @@ fn spi_faults_are_flagged_counted_and_survived() {
 }
 
 /// The pump the estimator can trust, decided in the loop: the board's DDS steps at
-/// IO_UPDATE, and a core told `Linear` (what `Config::table2()` says) never retunes.
+/// IO_UPDATE, and a core told `Linear` (what `Config::table2()` says) fails. Before the
+/// rate walk it never retuned (sense amplitude ratio < 0.8); with it, it retunes (ω̂y²
+/// 1.6e-4 off, the staircase core's 3e-7) but its rate reads −793 °/s for a true 150,
+/// and the loop and its host-only run disagree.
 #[test]
-fn a_linear_replica_on_the_stepping_dds_does_not_retune() {
+fn a_linear_replica_on_the_stepping_dds_fails() {
     if skip() {
         return;
     }
     let s = run(&paragyro_fil::drift_retune().unwrap(), PumpProfile::Linear);
     assert!(!s.pass);
-    assert_eq!(s.retunes, 0);
-    assert!(s.sense_amp_ratio < 0.8, "ratio {}", s.sense_amp_ratio);
+    assert!(
+        (s.rate_dps_est - s.rate_dps_true).abs() > 0.1 * s.rate_dps_true.abs(),
+        "rate {} °/s for {}",
+        s.rate_dps_est,
+        s.rate_dps_true
+    );
 }
 
 /// The drive falls out of its band (ωx² 1 → 1.1): the drive dies, the core flags it

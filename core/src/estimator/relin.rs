@@ -8,14 +8,17 @@
 //! | tick  | part                                                              |
 //! |-------|-------------------------------------------------------------------|
 //! | k     | trigger (same test as before), capture x₁, x₂                     |
-//! | k + 1 | θ̂1 = θ1n + sc1·x₁, θ̂2 = θ2n + sc2·x₂ (the captured x; `f64`)     |
-//! | k + 2 | the row constants of the new point ([`NominalConsts::new`])       |
-//! | k + 3 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
+//! | k + 1 | θ̂1 = θ1n + sc1·x₁ (the captured x; `f64`)                        |
+//! | k + 2 | θ̂2 = θ2n + sc2·x₂ (`f64`)                                         |
+//! | k + 3 | the row constants of the new point ([`NominalConsts::new`])       |
+//! | k + 4 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
 //!
 //! (The trigger tick only copies x: its `f64` sums, ≈ 1 000 instructions of soft-float,
 //! had fallen on the loop's costliest tick, a covariance reset, `firmware/scripts/
 //! fil-profile.sh drift-retune 1157`; on tick k + 1 they cost the same and give the same
-//! numbers.)
+//! numbers. θ̂1 and θ̂2 were one part until the rate walk's cost made that tick, 14 748
+//! instructions, the loop's costliest, 3 038 above the mean: `cargo test -p
+//! paragyro-tests --test fil`.)
 //!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
@@ -23,7 +26,7 @@
 //! between use the old point, as they would have before the trigger.
 //!
 //! (The rate channel's hand-over, a new rate θ24 + Δ, θ14 − Δ at the end of a rate
-//! transient, went through the same four parts until the slow RLS took the rate as a
+//! transient, went through the same parts until the slow RLS took the rate as a
 //! random walk, `rate.walk_dps`, which made it redundant: README, "Rate channel".)
 
 use super::design::Design;
@@ -34,7 +37,7 @@ use crate::rows::NominalConsts;
 /// The re-linearisation in progress (`Default`: none).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Relin<T> {
-    /// 0 idle, else the next part to do (1: θ̂1 and θ̂2, 2: constants, 3: swap).
+    /// 0 idle, else the next part to do (1: θ̂1, 2: θ̂2, 3: constants, 4: swap).
     phase: u8,
     x1: [T; 8],
     x2: [T; 6],
@@ -45,6 +48,14 @@ pub(crate) struct Relin<T> {
     t14: T,
     t22: T,
     t24: T,
+}
+
+impl<T> Relin<T> {
+    /// A re-linearisation is in progress (its `f64` parts make the tick's costliest
+    /// ticks: the rate walk keeps off them).
+    pub(crate) fn busy(&self) -> bool {
+        self.phase != 0
+    }
 }
 
 impl<T: Real> State<T> {
@@ -75,20 +86,24 @@ impl<T: Real> State<T> {
                 for j in 0..8 {
                     p.t1[j] = self.lin.th1n[j] + (f.sc1[j] * p.x1[j]).to_f64();
                 }
+                p.phase = 2;
+            }
+            2 => {
+                let p = &mut self.lin.pending;
                 for j in 0..6 {
                     p.t2[j] = self.lin.th2n[j] + (f.sc2[j] * p.x2[j]).to_f64();
                 }
                 // a non-finite point is dropped (as the one-tick version drops it)
                 let finite = p.t1.iter().chain(p.t2.iter()).all(|v| v.is_finite());
-                p.phase = if finite { 2 } else { 0 };
+                p.phase = if finite { 3 } else { 0 };
             }
-            2 => {
+            3 => {
                 let p = &mut self.lin.pending;
                 p.nom = NominalConsts::new(&p.t1, &p.t2, d.units.om_ref);
                 p.t14 = T::from_f64(p.t1[3]);
                 p.t22 = T::from_f64(p.t2[1]);
                 p.t24 = T::from_f64(p.t2[3]);
-                p.phase = 3;
+                p.phase = 4;
             }
             // the swap waits for an updated tick: a flagged (held) sample must leave θ̂
             // exactly as it was, and the swap moves it by rounding
@@ -123,11 +138,11 @@ mod tests {
     extern crate std;
     use crate::config::Config;
 
-    /// The four parts in order: nothing moves until the swap; at the swap θ_nom becomes
+    /// The five parts in order: nothing moves until the swap; at the swap θ_nom becomes
     /// the trigger tick's estimate, the RLS keeps what it learnt since, and θ̂ = θ_nom +
     /// sc·x is the same before and after (f64: to rounding).
     #[test]
-    fn spread_relinearisation_keeps_theta_and_swaps_on_the_fourth_tick() {
+    fn spread_relinearisation_keeps_theta_and_swaps_on_the_fifth_tick() {
         let mut est = Config::table2().build::<f64>().unwrap();
         let (d, s) = (&est.design, &mut est.state);
         let every = d.fit.relin_every;
@@ -149,14 +164,15 @@ mod tests {
         assert!(s.rls1.set_estimate(x1b));
         s.relin_tick(d, k + 1, true);
         s.relin_tick(d, k + 2, true);
-        assert_eq!(s.lin.pending.phase, 3);
+        s.relin_tick(d, k + 3, true);
+        assert_eq!(s.lin.pending.phase, 4);
         assert_eq!(s.lin.relins, 0);
         let (b1, b2) = s.theta(d);
         // a held (not updated) tick leaves the swap pending and θ̂ bit for bit
-        s.relin_tick(d, k + 3, false);
-        assert_eq!((s.lin.pending.phase, s.lin.relins), (3, 0));
+        s.relin_tick(d, k + 4, false);
+        assert_eq!((s.lin.pending.phase, s.lin.relins), (4, 0));
         assert_eq!(s.theta(d), (b1, b2));
-        s.relin_tick(d, k + 3, true);
+        s.relin_tick(d, k + 4, true);
         assert_eq!((s.lin.pending.phase, s.lin.relins), (0, 1));
         let (a1, a2) = s.theta(d);
         for (b, a) in b1.iter().chain(b2.iter()).zip(a1.iter().chain(a2.iter())) {

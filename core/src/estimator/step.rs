@@ -171,8 +171,8 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 3a: the fast rate channel on this sample, given the slow θ of the last
-    /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves
-    /// fast.
+    /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves,
+    /// and at the end of a gate the slow estimate takes the new rate (θ24 + Δ, θ14 − Δ).
     #[inline(always)]
     fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>) {
         self.rate
@@ -254,7 +254,10 @@ impl<T: Real> State<T> {
     /// [`WALK_CAP_DPS`]: super::design::WALK_CAP_DPS
     #[inline(always)]
     fn walk_rate(&mut self, f: &super::design::Fit<T>, k: u64) {
-        self.walk_on = self.rls2.add_walk(3, f.walk2, f.walk_cap2);
+        if self.lin.pending.busy() {
+            return;
+        }
+        self.walk_on = self.rate.moving(k) && self.rls2.add_walk(3, f.walk2, f.walk_cap2);
         if !self.walk_on {
             self.walk_prev24 = None;
         } else if k & 1 == 1 {
@@ -306,7 +309,7 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate, spread over four ticks (`relin.rs`).
+    /// a moderate estimate, spread over five ticks (`relin.rs`).
     #[inline(always)]
     fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
         self.relin_tick(d, k, updated);

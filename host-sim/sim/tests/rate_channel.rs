@@ -129,9 +129,10 @@ fn assert_valid_within(tr: &[paragyro_simulator::trace::TraceRow], tol: f64) {
 }
 
 /// The same drift while the rate moves (a 5 Hz ±50 °/s sine from 1.9 s, settled, to the
-/// end): the slow identification does not recover (issue 10, README "Rate channel"), but
-/// the rate is never flagged valid while wrong: within 15 °/s of the truth (the channel's
-/// lag on a 5 Hz sine is ≈ 9°, 8 °/s) where valid; 880 °/s off before the quadrature test.
+/// end; the slow identification re-identifies and retunes since the rate walk, README
+/// "Rate channel", and did not before): the rate is never flagged valid while wrong:
+/// within 15 °/s of the truth (the channel's lag on a 5 Hz sine is ≈ 9°, 8 °/s) where
+/// valid; 880 °/s off before the quadrature test.
 #[test]
 fn rate_flag_is_never_valid_and_wrong_when_the_device_drifts_under_motion() {
     let ev = "[[event]]\nt_s = 1.9\nkind = \"rate_sine\"\namplitude_dps = 50.0\nfreq_hz = 5.0\nduration_s = 6.1\n";

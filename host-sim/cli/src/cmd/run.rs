@@ -22,6 +22,10 @@ pub struct Args {
     /// Precision of the core.
     #[arg(long, value_enum, default_value_t = PrecisionArg::F32)]
     pub precision: PrecisionArg,
+    /// Override the scenario's `[estimator] rate_walk_dps`: the slow RLS's rate as a random
+    /// walk of this standard deviation per sample, °/s (0: a constant rate).
+    #[arg(long, value_name = "DPS", value_parser = non_negative)]
+    pub rate_walk_dps: Option<f64>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -32,7 +36,10 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     if a.scenario == "paper-raw" {
         return super::paper_raw::exec(super::paper_raw::Args { out: a.out }, ctx);
     }
-    let sc = load(&a.scenario)?;
+    let mut sc = load(&a.scenario)?;
+    if let Some(w) = a.rate_walk_dps {
+        sc.estimator.rate_walk_dps = Some(w);
+    }
     let opts = RunOptions {
         precision: a.precision.into(),
         seed: a.seed,
@@ -43,4 +50,13 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     text.push_str(&file_list(&files));
     text.push_str(&report::short_summary(&result));
     ctx.say(&text)
+}
+
+/// A finite number ≥ 0.
+fn non_negative(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(v) => Err(format!("must be finite and ≥ 0 (got {v})")),
+        Err(e) => Err(e.to_string()),
+    }
 }
