@@ -50,14 +50,6 @@ pub(crate) struct Relin<T> {
     t24: T,
 }
 
-impl<T> Relin<T> {
-    /// A re-linearisation is in progress (its `f64` parts make the tick's costliest
-    /// ticks: the rate walk keeps off them).
-    pub(crate) fn busy(&self) -> bool {
-        self.phase != 0
-    }
-}
-
 impl<T: Real> State<T> {
     /// One tick of the spread re-linearisation (module docs): triggers on an updated
     /// tick every `relin_every` samples with a moderate deviation, else does the next

@@ -254,9 +254,6 @@ impl<T: Real> State<T> {
     /// [`WALK_CAP_DPS`]: super::design::WALK_CAP_DPS
     #[inline(always)]
     fn walk_rate(&mut self, f: &super::design::Fit<T>, k: u64) {
-        if self.lin.pending.busy() {
-            return;
-        }
         self.walk_on = self.rate.moving(k) && self.rls2.add_walk(3, f.walk2, f.walk_cap2);
         if !self.walk_on {
             self.walk_prev24 = None;
