@@ -485,11 +485,11 @@ impl<T: Real> RateState<T> {
         // with the slow θ23: a drift of the device (ωy², damping) shows in both
         // directions of the row and is left to the slow RLS
         let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
-        if moved {
-            self.moving_until = k + d.gate_len;
-        }
         let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
         self.quad_ok = quad_ok;
+        if moved && quad_ok {
+            self.moving_until = k + d.gate_len;
+        }
         if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
         }
