@@ -56,19 +56,20 @@
 //!   RLS is gated (no update, no detector), and for `rate.gate_s` after — provided its
 //!   quadrature agrees with the slow θ23 to the same tolerance: a drift of the device
 //!   (ωy², damping) moves both directions of the row and is left to the slow RLS;
-//! * at the end of such a transient the slow RLS's estimate takes the new rate from the
-//!   narrow channel (θ24 + Δ, θ14 − Δ, Δ = its θ24 minus the slow θ24), so the slow rows
-//!   continue consistent instead of seeing a step, and the gate, which the departure
-//!   would otherwise hold for ever, ends;
-//! * the slow RLS's rate term is a random walk (`rate.walk_dps`, 0.3 °/s per sample,
-//!   `estimator/step.rs` `walk_rate`): the sense θ24 takes that process noise every
-//!   update, the drive θ14 the square of the sense θ24's move, so between gates the slow
-//!   rows follow the rate, and the slow RLS re-identifies a drift while the rate moves,
-//!   which it did not before the walk (README, "Rate channel"). With the walk the
-//!   hand-over moves the estimate directly: it used to move the linearisation point
-//!   through the spread re-linearisation (four ticks, the slow RLS gated until the swap),
-//!   which the flash and the tick budget no longer leave room for; the same step, chirp and
-//!   ramp results.
+//! * while the narrow channel sees the rate move (the same tests with the quadrature
+//!   agreeing, gated or not, and for `rate.gate_s` after: [`RateState::moving`]), the slow
+//!   RLS's rate term is a random walk (`rate.walk_dps`, 0.3 °/s per sample,
+//!   `estimator/step.rs` `walk_rate`): the sense θ24 takes that process noise on every
+//!   update, the drive θ14 the square of the sense θ24's move, so the slow rows follow a
+//!   moving rate between gates, and the slow RLS re-identifies a drift of the device while
+//!   the rate moves, which it did not before the walk (README, "Rate channel"). The walk
+//!   replaced a hand-over at the end of each gate (the linearisation point moved to the
+//!   narrow channel's rate through the spread re-linearisation, four ticks, the slow RLS
+//!   gated until the swap), whose code the flash budget no longer left room for.
+//!
+//! Known limit: after a step the narrow channel's departure from the slow rate renews the
+//! gate on every sample, so the slow RLS stays gated (README, "Rate channel"; so it did
+//! with the hand-over, which waited for the gate's end).
 //!
 //! # Validity
 //!

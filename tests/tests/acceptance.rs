@@ -111,7 +111,7 @@ fn drift_retune() {
 /// 5 Hz ±50 °/s sine on the 150 °/s from start-up to the end
 /// (`host-sim/scenarios/drift-retune-rate-sine.toml`). Before the slow RLS took the rate
 /// as a random walk (`rate.walk_dps`) it never settled under the sine: 154 covariance
-/// resets and no retune; now 11 and the retune. At most 30 resets here (the drift's own
+/// resets and no retune; now 16 and the retune. At most 30 resets here (the drift's own
 /// re-identification takes 13 on `drift-retune`).
 #[test]
 fn drift_retune_while_the_rate_moves() {
