@@ -193,8 +193,8 @@ impl<T: Real> RateDesign<T> {
         self.to_dps
     }
 
-    /// γ → °/s in `T`.
-    pub(crate) fn to_dps_t(&self) -> T {
+    /// °/s per unit of γ, in `T`.
+    pub(crate) fn dps_per_gamma(&self) -> T {
         self.to_dps_t
     }
 }

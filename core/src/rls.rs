@@ -685,7 +685,9 @@ impl<T: Real, const N: usize> Rls<T, N> {
         for k in j..N {
             pjj += self.u[j][k] * self.u[j][k] * self.d[k];
         }
-        if !(pjj < cap) {
+        // NaN is not below the cap
+        let below = pjj < cap;
+        if !below {
             return false;
         }
         // the update reads and writes the leading 4×4 block only: one copy of its code

@@ -274,7 +274,7 @@ impl<T: Real> Design<T> {
         // of `dps` moves them by 2γ, γ = dps/to_dps; in `T` (an `f64` chain here cost
         // ≈ 250 B of soft-float calls in the firmware image). A zero scale gives +∞,
         // which `Rls::add_walk` refuses.
-        let two_per_dps = T::from_f64(2.0) / rate.to_dps_t();
+        let two_per_dps = T::from_f64(2.0) / rate.dps_per_gamma();
         let w = T::from_f64(cfg.rate.walk_dps) * two_per_dps;
         let c = T::from_f64(WALK_CAP_DPS) * two_per_dps;
         let (s1, s2) = (fit.sc1[3], fit.sc2[3]);
