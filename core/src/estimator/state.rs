@@ -131,7 +131,8 @@ pub(crate) struct State<T: Real> {
     pub last_reset: u64,
     /// The sense's θ24 at the drive's last walk (the rate walk carries its moves to θ14).
     pub walk_prev24: Option<T>,
-    /// The sense walked at its last turn (below its cap).
+    /// The sense's θ24 walked on the last update (the rate moving, its variance below
+    /// the cap).
     pub walk_on: bool,
     /// A warm start's first settle is due: the settle window counts from the end of the
     /// start-up gate (`persist`); cleared by that settle and by any reset.

@@ -171,8 +171,8 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 3a: the fast rate channel on this sample, given the slow θ of the last
-    /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves,
-    /// and at the end of a gate the slow estimate takes the new rate (θ24 + Δ, θ14 − Δ).
+    /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves
+    /// and says when the slow RLS's rate walks (stage 4a).
     #[inline(always)]
     fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>) {
         self.rate
