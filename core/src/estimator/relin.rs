@@ -18,8 +18,8 @@
 //! fil-profile.sh drift-retune 1157`; on tick k + 1 they cost the same and give the same
 //! numbers. θ̂1 and θ̂2 are apart since the rate walk: together, in a trial that kept
 //! the walk off these ticks, that tick was the loop's costliest, 3 038 instructions above
-//! the mean where the loop test allows 3 000; apart, the costliest tick is 14 628 against
-//! a mean of 11 697, `cargo fw-loop`.)
+//! the mean where the loop test allows 3 000; apart, the costliest tick is 14 627 against
+//! a mean of 11 696, `cargo fw-loop`.)
 //!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
@@ -27,8 +27,9 @@
 //! between use the old point, as they would have before the trigger.
 //!
 //! (The rate channel's hand-over, a new rate θ24 + Δ, θ14 − Δ at the end of a rate
-//! transient, went through the same parts until the slow RLS took the rate as a
-//! random walk, `rate.walk_dps`, which made it redundant: README, "Rate channel".)
+//! transient, went through the same parts; it was removed when the slow RLS took the
+//! rate as a random walk, `rate.walk_dps`, whose code needed its flash: README, "Rate
+//! channel".)
 
 use super::design::Design;
 use super::state::State;

@@ -131,9 +131,6 @@ pub(crate) struct State<T: Real> {
     pub last_reset: u64,
     /// The sense's θ24 at the drive's last walk (the rate walk carries its moves to θ14).
     pub walk_prev24: Option<T>,
-    /// The sense's θ24 walked on the last update (the rate moving, its variance below
-    /// the cap).
-    pub walk_on: bool,
     /// A warm start's first settle is due: the settle window counts from the end of the
     /// start-up gate (`persist`); cleared by that settle and by any reset.
     pub warm_first: bool,
@@ -180,7 +177,6 @@ impl<T: Real> State<T> {
             bad_gate_until: 0,
             last_reset: 0,
             walk_prev24: None,
-            walk_on: false,
             warm_first: false,
             change_pending: false,
             bound_learned: false,
@@ -225,7 +221,6 @@ impl<T: Real> State<T> {
             bad_gate_until,
             last_reset,
             walk_prev24,
-            walk_on,
             warm_first,
             change_pending,
             bound_learned,
@@ -244,7 +239,6 @@ impl<T: Real> State<T> {
         lin.move_to(th1n, th2n);
         *rate = RateState::new(&d.rate);
         *walk_prev24 = None;
-        *walk_on = false;
         *stuck = StuckDetector::default();
         *det1 = ChangeDetector::new(&d.fit.change);
         *det2 = ChangeDetector::new(&d.fit.change);

@@ -254,8 +254,8 @@ impl<T: Real> State<T> {
     /// [`WALK_CAP_DPS`]: super::design::WALK_CAP_DPS
     #[inline(always)]
     fn walk_rate(&mut self, f: &super::design::Fit<T>, k: u64) {
-        self.walk_on = self.rate.moving(k) && self.rls2.add_walk(3, f.walk2, f.walk_cap2);
-        if !self.walk_on {
+        let walked = self.rate.moving(k) && self.rls2.add_walk(3, f.walk2, f.walk_cap2);
+        if !walked {
             self.walk_prev24 = None;
         } else if k & 1 == 1 {
             let th24 = self.lin.th24n + f.sc2[3] * self.rls2.estimate()[3];
