@@ -26,7 +26,7 @@
 //! | [`persist`] | warm start: the converged estimate as a versioned, CRC-checked snapshot |
 //! | [`estimator`] | the design, the state and the one `step()` that ties the stages |
 #![no_std]
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 // Index loops over small fixed matrices read like the math they implement.
 #![allow(clippy::needless_range_loop)]

@@ -8,6 +8,34 @@
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
+/// The FPU's square root on a hard-float Arm core (the Cortex-M4F): VSQRT.F32 is IEEE 754
+/// correctly rounded, as `libm::sqrtf` is, so the chip and the host keep bit-identical
+/// results; `libm` has no Arm path and its software `sqrtf` cost 480 B of flash (code and
+/// table) and ≈ 40 instructions a call. A two-instruction function, not inline `asm!`: the
+/// `sreg` operands need the `vfp2` target feature, which stable Rust does not let the crate
+/// enable (the thumbv7em-none-eabihf target has the FPU, its assembler takes the instruction).
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+#[allow(unsafe_code)] // the crate's only unsafe: `lib.rs` denies it everywhere else
+mod vsqrt {
+    core::arch::global_asm!(
+        ".section .text.paragyro_vsqrtf,\"ax\",%progbits",
+        ".global paragyro_vsqrtf",
+        ".type paragyro_vsqrtf,%function",
+        ".fpu fpv4-sp-d16",
+        ".thumb_func",
+        "paragyro_vsqrtf:",
+        "vsqrt.f32 s0, s0",
+        "bx lr",
+        ".size paragyro_vsqrtf, . - paragyro_vsqrtf",
+    );
+    // SAFETY: the function above reads s0 and writes s0, as the AAPCS-VFP `extern "C"`
+    // call of an `f32 -> f32` function expects, and touches no memory: safe for any `x`.
+    unsafe extern "C" {
+        /// √x in s0 → s0 (AAPCS-VFP).
+        pub safe fn paragyro_vsqrtf(x: f32) -> f32;
+    }
+}
+
 /// A real floating-point scalar (`f32` or `f64`).
 pub trait Real:
     Copy
@@ -168,6 +196,11 @@ impl Real for f32 {
     }
     #[inline]
     fn sqrt(self) -> Self {
+        #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+        {
+            vsqrt::paragyro_vsqrtf(self)
+        }
+        #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
         libm::sqrtf(self)
     }
     #[inline]
