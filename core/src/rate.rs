@@ -341,6 +341,12 @@ pub struct RateState<T> {
     amp2_slow: T,
     /// The slow RLS is gated until this sample (the rate moved).
     gate_until: u64,
+    /// Samples of the current hold that the narrow channel's rate has been still for.
+    held: u32,
+    /// The hand-over due (Δθ24), 0 if none.
+    handover: T,
+    /// The narrow channel's θ24 averaged over ≈ 0.26 s (an EMA of 1/128 per sample).
+    t24_avg: T,
     /// The rate moved (fast, or away from the slow RLS's) less than a gate's length ago,
     /// whether or not the slow RLS is gated: the slow RLS's rate walks until this sample.
     moving_until: u64,
@@ -485,7 +491,10 @@ impl<T: Real> RateState<T> {
         // the rate moved (fast, or away from the slow RLS's) while the quadrature agrees
         // with the slow θ23: a drift of the device (ωy², damping) shows in both
         // directions of the row and is left to the slow RLS
-        let moved = gp.abs() > d.gate_accel || (t24c - th.th24).abs() > d.gate_dev;
+        // ≈ 0.26 s at 500 Hz (a power of two: no design-time constant)
+        self.t24_avg += (t24c - self.t24_avg) * T::from_f64(1.0 / 128.0);
+        let fast = gp.abs() > d.gate_accel;
+        let moved = fast || (t24c - th.th24).abs() > d.gate_dev;
         let quad_ok = (t23c - th.th23).abs() < d.gate_dev;
         self.quad_ok = quad_ok;
         if moved && quad_ok {
@@ -493,7 +502,32 @@ impl<T: Real> RateState<T> {
         }
         if slow_settled && moved && quad_ok && steady {
             self.gate_until = k + d.gate_len;
+            // a hold the slow RLS cannot end (after a step its own departure from the new
+            // rate renews the gate): once the narrow channel's rate has stayed within the
+            // gate's deviation of its own average for a gate's length, the slow estimate
+            // takes that average (θ24 + Δ, θ14 − Δ), still gated. A sine or a ramp never
+            // stays that still; the average lags a step (≈ 0.3 °/s left after 50 °/s), and
+            // the rest is the slow RLS's once the gate ends
+            let still = !fast && (t24c - self.t24_avg).abs() < d.gate_dev;
+            self.held = if still {
+                self.held.saturating_add(1)
+            } else {
+                0
+            };
+            let delta = self.t24_avg - th.th24;
+            if u64::from(self.held) >= d.gate_len && delta.abs() > d.gate_dev {
+                self.handover = delta;
+                self.held = 0;
+            }
+        } else {
+            self.held = 0;
         }
+    }
+
+    /// The move Δ of θ24 the slow estimate must take now (θ24 + Δ, θ14 − Δ: a new rate,
+    /// μxy unchanged), once; 0 when none is due.
+    pub fn take_handover(&mut self) -> T {
+        core::mem::replace(&mut self.handover, T::ZERO)
     }
 
     /// The rate moved less than a gate's length before sample `k` (the slow RLS's rate

@@ -710,6 +710,17 @@ impl<T: Real, const N: usize> Rls<T, N> {
         true
     }
 
+    /// Moves one parameter of the estimate by `delta` (a known jump of it); the covariance
+    /// is kept. A non-finite `delta` or `j ≥ N` changes nothing.
+    pub fn shift(&mut self, j: usize, delta: T) {
+        // one comparison (NaN and ±∞ fail it), not `is_finite`'s integer class tests
+        if delta.abs() < T::MAX
+            && let Some(x) = self.x.get_mut(j)
+        {
+            *x += delta;
+        }
+    }
+
     /// Replaces the estimate (e.g. after re-centring the nominal θ); the covariance is
     /// kept. Returns `false` and changes nothing if any entry is NaN or ±∞.
     pub fn set_estimate(&mut self, x: [T; N]) -> bool {

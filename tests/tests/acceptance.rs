@@ -136,6 +136,53 @@ fn drift_retune_while_the_rate_moves() {
     );
 }
 
+/// A rate step on a settled device (`host-sim/scenarios/rate-step.toml`: 150 → 100 °/s at
+/// 3 s): the slow RLS is gated through the step, and its own departure from the new rate
+/// kept renewing the gate, so it held the old rate to the end (`rate_dps_slow` 149.97, gated
+/// on 99.9 % of the samples after the step). Once the narrow channel's rate is still, a
+/// hand-over gives the slow RLS its averaged rate: from 2 s after the step the slow rate must
+/// be within the gate's deviation (`rate.gate_dev_dps`, 1 °/s) of 100 and ungated, without
+/// a covariance reset, and the fast rate within 1 % from 25 ms after the step (0.1 s means).
+#[test]
+fn the_slow_rate_takes_a_step_after_a_hold() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../host-sim/scenarios/rate-step.toml"
+    );
+    let sc = paragyro_simulator::scenario::Scenario::from_file(std::path::Path::new(path))
+        .expect("the scenario file");
+    let opts = paragyro_simulator::runner::RunOptions {
+        precision: Precision::F32,
+        seed: None,
+    };
+    let r = paragyro_simulator::runner::run(&sc, &opts, &mut |_| {}).expect("run failed");
+    const GATED: u32 = 1 << 6;
+    assert_eq!(paragyro_simulator::trace::HEALTH_NAMES[6], "gated");
+    for row in &r.trace {
+        if row.t_s >= 5.0 {
+            assert!(
+                (row.rate_dps_slow - 100.0).abs() < 1.0 && row.health & GATED == 0,
+                "t = {:.3} s: slow rate {} °/s, health {:#b}",
+                row.t_s,
+                row.rate_dps_slow,
+                row.health
+            );
+        }
+    }
+    // the fast rate, averaged over 0.1 s windows (its per-sample noise is 0.24 °/s rms)
+    let after: Vec<_> = r.trace.iter().filter(|row| row.t_s >= 3.025).collect();
+    for w in after.chunks(50) {
+        let mean = w.iter().map(|row| row.rate_dps_est).sum::<f64>() / w.len() as f64;
+        assert!(
+            (mean - 100.0).abs() <= 0.5,
+            "fast rate {mean} °/s over {:.3}–{:.3} s",
+            w[0].t_s,
+            w[w.len() - 1].t_s
+        );
+    }
+    assert_eq!(r.trace.last().map(|row| row.resets), Some(0));
+}
+
 /// The targets of `drift-retune` (above) on a run of it.
 fn assert_drift_retune_targets(r: &paragyro_simulator::trace::RunResult, name: &str) {
     for row in r.trace.iter().filter(|row| row.t_s >= 3.0) {

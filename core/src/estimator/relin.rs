@@ -26,10 +26,11 @@
 //! the swap (up to rounding), exactly as the one-tick version keeps it. The ticks
 //! between use the old point, as they would have before the trigger.
 //!
-//! (The rate channel's hand-over, a new rate θ24 + Δ, θ14 − Δ at the end of a rate
-//! transient, went through the same parts; it was removed when the slow RLS took the
-//! rate as a random walk, `rate.walk_dps`, whose code needed its flash: README, "Rate
-//! channel".)
+//! (The rate channel's first hand-over, a new rate θ24 + Δ, θ14 − Δ at the end of every
+//! rate transient, went through the same parts; it was removed when the slow RLS took the
+//! rate as a random walk, `rate.walk_dps`, whose code needed its flash. The hand-over that
+//! ends a long hold after a rate step moves the estimate itself, `Rls::shift` in
+//! `update`: README, "Rate channel".)
 
 use super::design::Design;
 use super::state::State;

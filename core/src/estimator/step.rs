@@ -192,6 +192,11 @@ impl<T: Real> State<T> {
             &th,
             (self.k, slow_ok),
         );
+        // a hold after a rate step, once the narrow channel's rate is still: the slow
+        // estimate takes its averaged rate (θ24 + Δ, θ14 − Δ; Δ = 0 on all other samples)
+        let delta = self.rate.take_handover();
+        self.rls2.shift(3, delta / d.fit.sc2[3]);
+        self.rls1.shift(3, -delta / d.fit.sc1[3]);
     }
 
     /// Stage 4: one RLS update per row on both axes (weighted to unit noise, columns

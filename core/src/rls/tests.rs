@@ -909,3 +909,30 @@ fn add_walk_adds_q_on_one_diagonal_entry_below_its_cap() {
     assert_eq!(rls.covariance(), before);
     assert!(rls.add_walk(3, 1.0, pjj * 1.01), "below its cap");
 }
+
+/// `shift` moves one entry of the estimate by `delta` and nothing else (the covariance is
+/// kept), and a non-finite `delta` or `j ≥ N` changes nothing.
+#[test]
+fn shift_moves_one_estimate_entry_and_keeps_the_covariance() {
+    let mut rng = Rng::new(23);
+    let mut rls: Rls<f64, 6> = Rls::new(unbounded(0.999, 10.0));
+    for _ in 0..40 {
+        rls.begin_sample();
+        let phi: [f64; 6] = core::array::from_fn(|_| rng.uni());
+        rls.update(&phi, rng.gauss());
+    }
+    let (p, x) = (rls.covariance(), rls.estimate());
+    rls.shift(3, 0.5);
+    let x2 = rls.estimate();
+    for j in 0..6 {
+        let want = if j == 3 { x[j] + 0.5 } else { x[j] };
+        assert_eq!(x2[j], want, "entry {j}");
+    }
+    assert_eq!(rls.covariance(), p);
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        rls.shift(3, bad);
+    }
+    rls.shift(6, 1.0);
+    assert_eq!(rls.estimate(), x2);
+    assert_eq!(rls.covariance(), p);
+}
