@@ -67,14 +67,18 @@
 //!   narrow channel's rate through the spread re-linearisation, four ticks, the slow RLS
 //!   gated until the swap), whose code the flash budget no longer left room for.
 //!
-//! Known limit: after a step the narrow channel's departure from the slow rate renews the
-//! gate on every sample, so the slow RLS stays gated (README, "Rate channel"; so it did
-//! with the hand-over, which waited for the gate's end).
+//! After a step the narrow channel's departure from the slow rate renews the gate on every
+//! sample, so the slow RLS stayed gated to the end (so it did with the first hand-over,
+//! which waited for the gate's end). Now, once the narrow channel's rate has stayed within
+//! `rate.gate_dev_dps` of its own ≈ 0.26 s average for `rate.gate_s`, the slow estimate
+//! takes that average ([`RateState::take_handover`]: θ24 + Δ, θ14 − Δ), and the gate ends
+//! as the slow rate agrees (README, "Rate channel").
 //!
 //! # Validity
 //!
 //! The rate is valid when this sample's inputs are valid, the drive is locked, the slow
-//! identification has settled at least once since start-up and no change of the device
+//! identification has settled at least once since start-up and since the drive last lost
+//! its lock, no change of the device
 //! is pending (the slow θ the row relies on are being re-identified), the fast row is
 //! solvable (|A1| above the lock threshold), the drive amplitude is steady (|A1|² at
 //! least [`DRIVE_STEADY2`] of its slow mean: not ringing down), the narrow channel's
@@ -352,6 +356,8 @@ pub struct RateState<T> {
     moving_until: u64,
     /// The slow identification has settled once since start-up.
     settled_once: bool,
+    /// Settled samples still to wait after the drive lost its lock (see `assess`).
+    relock: u32,
     /// The narrow channel's quadrature agrees with the slow θ23 (this sample).
     quad_ok: bool,
     valid: bool,
@@ -555,9 +561,22 @@ impl<T: Real> RateState<T> {
             self.est.gamma_slow = self.est.gamma;
         }
         self.settled_once |= settled;
+        // a drive that lost its lock fed the slow RLS rows of a vanishing amplitude, and its
+        // θ may have jumped, the narrow channel's rate with them, so the gate does not see
+        // it (`characterise` at s = 1.15 had valid samples 10 °/s off after one, until the
+        // slow RLS updated again): after a lock loss the rate waits for a gate length of
+        // samples on which the slow identification is settled (updating, not gated)
+        if !drive_locked {
+            if self.settled_once {
+                self.relock = d.gate_len as u32;
+            }
+        } else if settled {
+            self.relock = self.relock.saturating_sub(1);
+        }
         self.valid = inputs_valid
             && drive_locked
             && self.settled_once
+            && self.relock == 0
             && !change_pending
             && self.est.solved
             && self.est.steady

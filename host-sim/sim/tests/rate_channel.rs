@@ -100,6 +100,22 @@ fn rate_flag_drops_while_the_drive_rings_down() {
     );
 }
 
+/// `characterise` (seed 1): at the pump scale 1.15 (from 14 s) the drive loses its lock
+/// again and again, and a lock loss can make the slow θ jump (the slow rate 153.6 → 144.0
+/// °/s in 10 ms at 18.28 s) with the narrow channel's rate, so the gate does not see it.
+/// The flag now waits, after a lock loss, for a gate length of samples on which the slow
+/// identification is settled: no valid sample more than 4 °/s off (10.54 °/s at 18.344 s
+/// before; 2.85 now, where the drive's amplitude dips), and more than 6 000 of the 10 001
+/// samples still valid (7 207 before, 6 416 now).
+#[test]
+fn rate_flag_waits_for_the_slow_identification_after_a_lock_loss() {
+    let sc = paragyro_simulator::scenario::Scenario::builtin("characterise").unwrap();
+    let tr = rate_response::trace(&sc, Precision::F32, 1).unwrap();
+    let valid = tr.iter().filter(|r| r.rate_valid).count();
+    assert!(valid > 6000, "{valid} valid samples of {}", tr.len());
+    assert_valid_within(&tr, 4.0);
+}
+
 /// Through the ωy² drift of `drift-retune` (seed 1) the fast row, solved with the slow θ22
 /// of before the drift, reads the drift as rate; the change detector needs a few samples
 /// to see it. The narrow channel's quadrature leaves the slow θ23 at once, and the flag
