@@ -31,6 +31,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
 pub mod device;
+pub mod lod;
 pub mod outside;
 #[cfg(test)]
 mod tests;

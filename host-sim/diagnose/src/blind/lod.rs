@@ -1,0 +1,300 @@
+//! Detection limits measured on development devices (`cargo run --profile test -p
+//! paragyro-diagnose --example lod -- K SEED DIR`): for each library effect and each
+//! out-of-library type, `points` sizes log-spaced over the range the blind benchmark
+//! draws ([`super::size_range`], [`Outside::size_range`]), K devices at each size drawn
+//! as the benchmark draws them (tolerances, rate, accelerations, noise, temperature rise;
+//! the effect's sign, beat and electrodes too), recorded and diagnosed as the benchmark
+//! does. A library effect counts as detected when it is named, an out-of-library one when
+//! the verdict is `unknown`. The **90 % limit** of an effect is the smallest grid size
+//! from which on every larger grid size at least 90 % of the K records are detected; no
+//! limit when the largest size misses.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::Context;
+use rand::{Rng, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use serde::Serialize;
+
+use super::outside::{Outside, OutsideSpec};
+use super::{Category, DeviceDraw, Draw, SizeRange, correct_for, draw_effect, size_range};
+use crate::diagnose::{self, Options, to_json_sorted};
+use paragyro_simulator::effects::{Effect, LIBRARY};
+use paragyro_simulator::par;
+use paragyro_simulator::record::{self, RecordOptions};
+use paragyro_simulator::scenario::Scenario;
+
+/// What a sweep targets: a library effect or an out-of-library type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Target {
+    /// A library effect (detected when named).
+    Library(Effect),
+    /// An out-of-library type (detected when `unknown`).
+    Outside(Outside),
+}
+
+impl Target {
+    /// Every library effect, then every out-of-library type.
+    pub fn all() -> Vec<Target> {
+        LIBRARY
+            .iter()
+            .map(|&e| Target::Library(e))
+            .chain(Outside::ALL.iter().map(|&o| Target::Outside(o)))
+            .collect()
+    }
+
+    /// The name in reports (`outside:` before an out-of-library type).
+    pub fn name(self) -> String {
+        match self {
+            Target::Library(e) => e.name().to_string(),
+            Target::Outside(o) => format!("outside:{}", o.name()),
+        }
+    }
+
+    /// The range the blind benchmark draws, with its stated limit.
+    pub fn range(self) -> SizeRange {
+        match self {
+            Target::Library(e) => size_range(e),
+            Target::Outside(o) => o.size_range(),
+        }
+    }
+}
+
+/// The sizes of a sweep: `points` log-spaced over [low, high] (both ends included).
+pub fn grid(r: SizeRange, points: usize) -> Vec<f64> {
+    let n = points.max(2);
+    (0..n)
+        .map(|i| {
+            let f = i as f64 / (n - 1) as f64;
+            (r.low.ln() + f * (r.high.ln() - r.low.ln())).exp()
+        })
+        .collect()
+}
+
+/// One size of one target: how many of its records were detected, and their verdicts.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LodRow {
+    /// The target's name.
+    pub target: String,
+    /// The magnitude.
+    pub size: f64,
+    /// Records at this size.
+    pub records: usize,
+    /// Detected (named, or `unknown` out of the library).
+    pub detected: usize,
+    /// Verdict → count.
+    pub verdicts: BTreeMap<String, usize>,
+}
+
+/// The 90 % limit from one target's rows (sorted by size): the smallest size from which
+/// every row has at least 90 % detected; `None` when the largest size misses.
+pub fn limit90(rows: &[&LodRow]) -> Option<f64> {
+    let mut limit = None;
+    for r in rows.iter().rev() {
+        if r.records > 0 && r.detected * 10 >= r.records * 9 {
+            limit = Some(r.size);
+        } else {
+            break;
+        }
+    }
+    limit
+}
+
+/// One drawn record of a sweep: the benchmark's draw with the magnitude fixed.
+fn draw_at(t: Target, size: f64, id: String, rng: &mut Xoshiro256PlusPlus) -> Draw {
+    let (category, effects, outside) = match t {
+        Target::Library(e) => {
+            let mut spec = draw_effect(rng, e);
+            spec.size = size.copysign(spec.size);
+            (Category::Single, vec![spec], None)
+        }
+        Target::Outside(o) => {
+            let signed = o.size_range().signed && rng.random::<bool>();
+            let spec = OutsideSpec {
+                kind: o,
+                size: if signed { -size } else { size },
+            };
+            (Category::Outside, Vec::new(), Some(spec))
+        }
+    };
+    Draw {
+        id,
+        category,
+        effects,
+        seed: rng.random::<u32>() as u64,
+        temp_rise_k: ((2.0 + 6.0 * rng.random::<f64>()) * 100.0).round() / 100.0,
+        device: DeviceDraw::draw(rng),
+        outside,
+    }
+}
+
+/// Runs the sweep into `dir` (records/, lod.json, lod.md) and returns its rows. `only`
+/// keeps the targets whose name contains it. `progress` gets a line per record.
+pub fn sweep(
+    k: usize,
+    seed: u64,
+    points: usize,
+    only: Option<&str>,
+    dir: &Path,
+    progress: &(dyn Fn(&str) + Sync),
+) -> anyhow::Result<Vec<LodRow>> {
+    anyhow::ensure!(k > 0, "K must be at least 1");
+    let sc = Scenario::load("characterise").map_err(anyhow::Error::new)?;
+    let targets: Vec<Target> = Target::all()
+        .into_iter()
+        .filter(|t| only.is_none_or(|s| t.name().contains(s)))
+        .collect();
+    anyhow::ensure!(!targets.is_empty(), "no target matches {only:?}");
+    let mut jobs = Vec::new();
+    for (ti, &t) in targets.iter().enumerate() {
+        for (si, &size) in grid(t.range(), points).iter().enumerate() {
+            for j in 0..k {
+                let mut rng = Xoshiro256PlusPlus::seed_from_u64(
+                    seed ^ 0x10d_5eed ^ ((ti as u64) << 40) ^ ((si as u64) << 20) ^ j as u64,
+                );
+                let id = format!("{}-{si}-{j}", t.name().replace(':', "-"));
+                jobs.push((t, size, draw_at(t, size, id, &mut rng)));
+            }
+        }
+    }
+    let rec_dir = dir.join("records");
+    std::fs::create_dir_all(&rec_dir)
+        .with_context(|| format!("cannot create {}", rec_dir.display()))?;
+    let n = jobs.len();
+    let done = AtomicUsize::new(0);
+    let verdicts = par::try_map(
+        &jobs,
+        |(_, _, d)| format!("record {}", d.id),
+        |(_, _, d)| {
+            let path = rec_dir.join(format!("{}.csv", d.id));
+            let opts = RecordOptions {
+                seed: Some(d.seed),
+                effects: d.effects.clone(),
+                rate_table: true,
+                temp: Some((25.0, d.temp_rise_k)),
+            };
+            record::write_simulated_record_ext(
+                &d.device.apply(&sc),
+                &path,
+                &opts,
+                d.hook(&sc),
+                &mut |_| {},
+            )
+            .with_context(|| format!("recording {}", d.id))?;
+            let rec = record::read_record(&path).map_err(anyhow::Error::new)?;
+            let r = diagnose::diagnose(&rec, &Options::default())
+                .with_context(|| format!("diagnosing {}", path.display()))?;
+            let _ = std::fs::remove_file(&path);
+            let i = done.fetch_add(1, Ordering::Relaxed) + 1;
+            progress(&format!(
+                "[{i}/{n}] {} → {}",
+                d.id,
+                r.report.verdict.answer()
+            ));
+            Ok(r.report.verdict.answer())
+        },
+    )?;
+    let mut rows: Vec<LodRow> = Vec::new();
+    for ((t, size, d), v) in jobs.iter().zip(&verdicts) {
+        let truth: Vec<Effect> = d.effects.iter().map(|e| e.effect).collect();
+        let hit = correct_for(d.category, &truth, *v);
+        let name = t.name();
+        let row = match rows
+            .iter_mut()
+            .find(|r| r.target == name && r.size == *size)
+        {
+            Some(r) => r,
+            None => {
+                rows.push(LodRow {
+                    target: name,
+                    size: *size,
+                    records: 0,
+                    detected: 0,
+                    verdicts: BTreeMap::new(),
+                });
+                rows.last_mut().expect("just pushed")
+            }
+        };
+        row.records += 1;
+        row.detected += usize::from(hit);
+        *row.verdicts.entry(v.to_string()).or_insert(0) += 1;
+    }
+    std::fs::write(dir.join("lod.json"), to_json_sorted(&rows)?)
+        .with_context(|| format!("cannot write {}", dir.join("lod.json").display()))?;
+    std::fs::write(dir.join("lod.md"), markdown(&targets, &rows, k, seed))?;
+    Ok(rows)
+}
+
+/// lod.md: per target its stated limit, the measured 90 % limit and the detection per size.
+pub fn markdown(targets: &[Target], rows: &[LodRow], k: usize, seed: u64) -> String {
+    let mut s = format!(
+        "# Detection limits measured (K = {k} devices per size, seed {seed})\n\n\
+         | target | stated limit | measured 90 % limit | detected per size (size: detected/K, verdicts) |\n\
+         |---|---|---|---|\n"
+    );
+    for t in targets {
+        let name = t.name();
+        let mine: Vec<&LodRow> = rows.iter().filter(|r| r.target == name).collect();
+        let lim = limit90(&mine).map_or("not reached".to_string(), |v| format!("{v:.3e}"));
+        let cells: Vec<String> = mine
+            .iter()
+            .map(|r| {
+                let v: Vec<String> = r.verdicts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+                format!(
+                    "{:.2e}: {}/{} ({})",
+                    r.size,
+                    r.detected,
+                    r.records,
+                    v.join(", ")
+                )
+            })
+            .collect();
+        s += &format!(
+            "| {name} | {:.1e} | {lim} | {} |\n",
+            t.range().limit,
+            cells.join("; ")
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(size: f64, detected: usize) -> LodRow {
+        LodRow {
+            target: "x".into(),
+            size,
+            records: 10,
+            detected,
+            verdicts: BTreeMap::new(),
+        }
+    }
+
+    /// The limit is where detection stays at or above 90 % up to the largest size, not
+    /// the first size that reaches it.
+    #[test]
+    fn limit90_is_where_detection_stays_at_90_percent() {
+        let rows = [row(1.0, 10), row(2.0, 3), row(3.0, 9), row(4.0, 10)];
+        let r: Vec<&LodRow> = rows.iter().collect();
+        assert_eq!(limit90(&r), Some(3.0));
+        let rows = [row(1.0, 9), row(2.0, 10), row(3.0, 8)];
+        let r: Vec<&LodRow> = rows.iter().collect();
+        assert_eq!(limit90(&r), None);
+        let rows = [row(1.0, 9), row(2.0, 10)];
+        let r: Vec<&LodRow> = rows.iter().collect();
+        assert_eq!(limit90(&r), Some(1.0));
+    }
+
+    /// The grid spans the drawn range, ends included, log-spaced.
+    #[test]
+    fn grid_spans_the_range_log_spaced() {
+        let g = grid(super::super::r(1e-9, 1e-5, 1e-7, true), 5);
+        assert_eq!(g.len(), 5);
+        assert!((g[0] - 1e-9).abs() < 1e-21 && (g[4] - 1e-5).abs() < 1e-17);
+        assert!((g[2] - 1e-7).abs() < 1e-19);
+    }
+}
