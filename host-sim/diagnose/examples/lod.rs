@@ -1,7 +1,8 @@
 //! Detection limits measured on development devices (`paragyro_diagnose::blind::lod`):
 //! `cargo run --profile test -p paragyro-diagnose --example lod -- K SEED DIR [POINTS
 //! [ONLY]]` writes DIR/lod.md and DIR/lod.json (POINTS sizes per effect, default 5; ONLY
-//! keeps the effects whose name contains it).
+//! keeps the effects whose name contains it), and keeps the missed records in
+//! DIR/records/ (with their truth) to be diagnosed again (`paragyro-sim diagnose`).
 
 use std::path::PathBuf;
 

@@ -130,8 +130,9 @@ fn draw_at(t: Target, size: f64, id: String, rng: &mut Xoshiro256PlusPlus) -> Dr
     }
 }
 
-/// Runs the sweep into `dir` (records/, lod.json, lod.md) and returns its rows. `only`
-/// keeps the targets whose name contains it. `progress` gets a line per record.
+/// Runs the sweep into `dir` (lod.json, lod.md, and records/ with the records that were
+/// missed, their truth beside them) and returns its rows. `only` keeps the targets whose
+/// name contains it. `progress` gets a line per record.
 pub fn sweep(
     k: usize,
     seed: u64,
@@ -175,7 +176,7 @@ pub fn sweep(
                 rate_table: true,
                 temp: Some((25.0, d.temp_rise_k)),
             };
-            record::write_simulated_record_ext(
+            let (files, _) = record::write_simulated_record_ext(
                 &d.device.apply(&sc),
                 &path,
                 &opts,
@@ -186,14 +187,19 @@ pub fn sweep(
             let rec = record::read_record(&path).map_err(anyhow::Error::new)?;
             let r = diagnose::diagnose(&rec, &Options::default())
                 .with_context(|| format!("diagnosing {}", path.display()))?;
-            let _ = std::fs::remove_file(&path);
+            let v = r.report.verdict.answer();
+            // the misses stay (record and truth) to be diagnosed again; the hits go
+            let truth: Vec<Effect> = d.effects.iter().map(|e| e.effect).collect();
+            let hit = correct_for(d.category, &truth, v);
+            if hit {
+                for f in [&files.csv, &files.truth] {
+                    std::fs::remove_file(f)
+                        .with_context(|| format!("cannot remove {}", f.display()))?;
+                }
+            }
             let i = done.fetch_add(1, Ordering::Relaxed) + 1;
-            progress(&format!(
-                "[{i}/{n}] {} → {}",
-                d.id,
-                r.report.verdict.answer()
-            ));
-            Ok(r.report.verdict.answer())
+            progress(&format!("[{i}/{n}] {} → {v}", d.id));
+            Ok(v)
         },
     )?;
     let mut rows: Vec<LodRow> = Vec::new();
