@@ -115,17 +115,7 @@ fn drift_retune() {
 /// re-identification takes 13 on `drift-retune`).
 #[test]
 fn drift_retune_while_the_rate_moves() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../host-sim/scenarios/drift-retune-rate-sine.toml"
-    );
-    let sc = paragyro_simulator::scenario::Scenario::from_file(std::path::Path::new(path))
-        .expect("the scenario file");
-    let opts = paragyro_simulator::runner::RunOptions {
-        precision: Precision::F32,
-        seed: None,
-    };
-    let r = paragyro_simulator::runner::run(&sc, &opts, &mut |_| {}).expect("run failed");
+    let r = run_scenario_file("drift-retune-rate-sine.toml");
     assert_drift_retune_targets(&r, "drift-retune-rate-sine");
     let c = &r.summary.counters;
     assert!(
@@ -145,17 +135,7 @@ fn drift_retune_while_the_rate_moves() {
 /// a covariance reset, and the fast rate within 1 % from 25 ms after the step (0.1 s means).
 #[test]
 fn the_slow_rate_takes_a_step_after_a_hold() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../host-sim/scenarios/rate-step.toml"
-    );
-    let sc = paragyro_simulator::scenario::Scenario::from_file(std::path::Path::new(path))
-        .expect("the scenario file");
-    let opts = paragyro_simulator::runner::RunOptions {
-        precision: Precision::F32,
-        seed: None,
-    };
-    let r = paragyro_simulator::runner::run(&sc, &opts, &mut |_| {}).expect("run failed");
+    let r = run_scenario_file("rate-step.toml");
     const GATED: u32 = 1 << 6;
     assert_eq!(paragyro_simulator::trace::HEALTH_NAMES[6], "gated");
     for row in &r.trace {
@@ -181,6 +161,21 @@ fn the_slow_rate_takes_a_step_after_a_hold() {
         );
     }
     assert_eq!(r.trace.last().map(|row| row.resets), Some(0));
+}
+
+/// A run (f32, the file's seed) of a scenario file of `host-sim/scenarios/` that is not
+/// built in.
+fn run_scenario_file(name: &str) -> paragyro_simulator::trace::RunResult {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../host-sim/scenarios")
+        .join(name);
+    let sc = paragyro_simulator::scenario::Scenario::from_file(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let opts = paragyro_simulator::runner::RunOptions {
+        precision: Precision::F32,
+        seed: None,
+    };
+    paragyro_simulator::runner::run(&sc, &opts, &mut |_| {}).expect("run failed")
 }
 
 /// The targets of `drift-retune` (above) on a run of it.
