@@ -5,7 +5,8 @@
 //! `TEMP_RISE_K`; `NOISE_PM` sets every device's noise density, `ACCEL0` zeroes the
 //! accelerations) and prints, per device, the verdict, the held-out
 //! residual over the record's noise, the estimated against the true noise energy ratio,
-//! and each device parameter's (calibrated − true)/σ; then the 1σ coverage.
+//! each device parameter's (calibrated − true)/σ and the held-out energy per row over ν²;
+//! then the 1σ coverage and the mean energy per row over ν² (`NOISE_ROW_PROFILE`).
 
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::diagnose::{Options, diagnose};
@@ -13,6 +14,9 @@ use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
 use rayon::prelude::*;
+
+/// A device's printed line, its parameters' z and its held-out energy per row over ν².
+type DeviceLine = (String, (Vec<f64>, Vec<f64>));
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<u64> = std::env::args()
@@ -31,7 +35,7 @@ fn main() -> anyhow::Result<()> {
         .transpose()?;
     let temp_rise: f64 = std::env::var("TEMP_RISE_K").map_or(Ok(4.0), |v| v.parse())?;
     let names = paragyro_core::physics::PHYSICAL_NAMES;
-    let rows: Vec<anyhow::Result<(String, Vec<f64>)>> = (first..first + count)
+    let rows: Vec<anyhow::Result<DeviceLine>> = (first..first + count)
         .into_par_iter()
         .map(|s| {
             let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(s);
@@ -81,15 +85,42 @@ fn main() -> anyhow::Result<()> {
                     .collect::<Vec<_>>()
                     .join(" ")
             );
-            Ok((line, z))
+            // each row's held-out energy after the baseline fit, over the record's ν²
+            let per_row: Vec<f64> = r
+                .held_out_by_row
+                .iter()
+                .map(|e| e.baseline / r.parameter_face.noise_energy_ratio)
+                .collect();
+            let line = format!(
+                "{line}\n         rows / nu2 {}",
+                per_row
+                    .iter()
+                    .map(|v| format!("{v:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+            Ok((line, (z, per_row)))
         })
         .collect();
     let mut all = Vec::new();
+    let mut rows_all: Vec<Vec<f64>> = Vec::new();
     for r in rows {
-        let (line, z) = r?;
+        let (line, (z, per_row)) = r?;
         println!("{line}");
         all.push(z);
+        rows_all.push(per_row);
     }
+    let nrow = rows_all.first().map_or(0, Vec::len);
+    let mean_rows: Vec<String> = (0..nrow)
+        .map(|i| {
+            let m = rows_all.iter().map(|v| v[i]).sum::<f64>() / rows_all.len() as f64;
+            format!("{m:.3}")
+        })
+        .collect();
+    println!(
+        "held-out energy per row / nu2, mean over the devices: {}",
+        mean_rows.join(" ")
+    );
     println!("z columns: {:?}", &names[..10]);
     for i in 0..10 {
         let c = all.iter().filter(|z| z[i].abs() <= 1.0).count();

@@ -2,7 +2,7 @@
 
 use super::report::Report;
 use super::verdict::Answer;
-use super::{GAP_MIN, GUARD_S, SHARE_MIN, T_SIG, UNEXPLAINED_MAX};
+use super::{GAP_MIN, GUARD_S, NONE_NOISE_MAX, SHARE_MIN, T_SIG, UNEXPLAINED_MAX};
 
 /// A number with 4 significant digits (scientific when small or large).
 fn g4(v: f64) -> String {
@@ -46,8 +46,9 @@ fn confirmation(s: &mut String, r: &Report) {
         return;
     }
     s.push_str(&format!(
-        "\n\nThe linear test left the verdict `unknown`; re-simulated at their fitted sizes (at most {:.0} % of the gap above the noise may be left):\n\n| effect | gap above the noise left | rows left | residual / noise | confirmed |\n|---|---|---|---|---|\n",
-        100.0 * UNEXPLAINED_MAX
+        "\n\nThe linear test left the verdict `unknown`; re-simulated at their fitted sizes (at most {:.0} % of the gap above the noise may be left, or the residual at most {:.1} × the record's noise, each row at its own noise level):\n\n| effect | gap above the noise left | rows left | residual / noise | confirmed |\n|---|---|---|---|---|\n",
+        100.0 * UNEXPLAINED_MAX,
+        NONE_NOISE_MAX
     ));
     for c in &r.confirmation {
         let rows: Vec<&str> = c

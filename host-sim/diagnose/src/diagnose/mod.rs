@@ -110,6 +110,15 @@ pub const SHARE_MIN: f64 = 0.6;
 /// mean 1.08). The record's own noise per row is this × its noise energy ratio ν²
 /// (estimated from the record, [`resim::noise_energy_ratio`]).
 pub const NOISE_ROW_ENERGY: f64 = 1.08;
+/// How the noise divides among the rows (`ROW_LABELS` order), mean 1: the held-out energy
+/// per row over the record's ν² after the baseline fit, on clean toleranced development
+/// devices (`cargo run --release -p paragyro-diagnose --example clean -- 300 48`, its last
+/// line: 0.725 … 1.103, mean 1.030), over its mean. The drive's 1st-harmonic rows carry ≈ 1.5× and 1.3× the mean on
+/// every device; with one level for all rows, the confirmation read that as a gap a large
+/// effect leaves unexplained (an angular vibration at 60 °/s: blind-benchmark.md).
+pub const NOISE_ROW_PROFILE: [f64; NR] = [
+    0.704, 1.510, 1.324, 0.930, 0.990, 0.811, 0.849, 0.686, 1.125, 1.071,
+];
 /// Re-simulations of the calibration, each a Gauss–Newton step: the simulator re-run on
 /// the record's inputs with the parameters the last fit gave, and the θ refitted on the new
 /// gap. The first fit runs on the rows without a re-simulation (their own approximations

@@ -29,3 +29,13 @@ fn spd_solver_handles_collinear_columns() {
     assert!((4.0 * x[0] + x[1] - 1.0).abs() < 1e-9 && (x[0] + 3.0 * x[1] - 2.0).abs() < 1e-9);
     assert!((inv[0] - 3.0 / 11.0).abs() < 1e-9);
 }
+
+/// The rows' noise profile has mean 1 (the totals against the noise are those of one level
+/// for all rows) and every entry positive.
+#[test]
+fn noise_row_profile_has_mean_one() {
+    let p = super::NOISE_ROW_PROFILE;
+    let mean = p.iter().sum::<f64>() / p.len() as f64;
+    assert!((mean - 1.0).abs() < 1e-3, "mean {mean}");
+    assert!(p.iter().all(|&v| v > 0.0));
+}
