@@ -23,7 +23,7 @@ use super::{Category, DeviceDraw, Draw, SizeRange, correct_for, draw_effect, siz
 use crate::diagnose::{self, Options, to_json_sorted};
 use paragyro_simulator::effects::{Effect, LIBRARY};
 use paragyro_simulator::par;
-use paragyro_simulator::record::{self, RecordOptions};
+use paragyro_simulator::record;
 use paragyro_simulator::scenario::Scenario;
 
 /// What a sweep targets: a library effect or an out-of-library type.
@@ -176,20 +176,7 @@ pub fn sweep(
         |(_, _, d)| format!("record {}", d.id),
         |(_, _, d)| {
             let path = rec_dir.join(format!("{}.csv", d.id));
-            let opts = RecordOptions {
-                seed: Some(d.seed),
-                effects: d.effects.clone(),
-                rate_table: true,
-                temp: Some((25.0, d.temp_rise_k)),
-            };
-            let (files, _) = record::write_simulated_record_ext(
-                &d.device.apply(&sc),
-                &path,
-                &opts,
-                d.hook(&sc),
-                &mut |_| {},
-            )
-            .with_context(|| format!("recording {}", d.id))?;
+            let files = d.write_record(&sc, &path)?;
             let rec = record::read_record(&path).map_err(anyhow::Error::new)?;
             let r = diagnose::diagnose(&rec, &Options::default())
                 .with_context(|| format!("diagnosing {}", path.display()))?;
@@ -205,13 +192,11 @@ pub fn sweep(
             }
             let i = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress(&format!("[{i}/{n}] {} → {v}", d.id));
-            Ok(v)
+            Ok((v, hit))
         },
     )?;
     let mut rows: Vec<LodRow> = Vec::new();
-    for ((t, size, d), v) in jobs.iter().zip(&verdicts) {
-        let truth: Vec<Effect> = d.effects.iter().map(|e| e.effect).collect();
-        let hit = correct_for(d.category, &truth, *v);
+    for ((t, size, _), (v, hit)) in jobs.iter().zip(&verdicts) {
         let name = t.name();
         let row = match rows
             .iter_mut()
@@ -230,7 +215,7 @@ pub fn sweep(
             }
         };
         row.records += 1;
-        row.detected += usize::from(hit);
+        row.detected += usize::from(*hit);
         *row.verdicts.entry(v.to_string()).or_insert(0) += 1;
     }
     std::fs::write(dir.join("lod.json"), to_json_sorted(&rows)?)
@@ -315,14 +300,7 @@ mod tests {
         let d = draw_at(t, size, "av".into(), &mut job_rng(202, 0, 1, 0));
         let dir = std::env::temp_dir().join(format!("paragyro-lod-av-{}", std::process::id()));
         let path = dir.join("av.csv");
-        let opts = RecordOptions {
-            seed: Some(d.seed),
-            effects: d.effects.clone(),
-            rate_table: true,
-            temp: Some((25.0, d.temp_rise_k)),
-        };
-        record::write_simulated_record_ext(&d.device.apply(&sc), &path, &opts, None, &mut |_| {})
-            .unwrap();
+        d.write_record(&sc, &path).unwrap();
         let rec = record::read_record(&path).unwrap();
         let r = diagnose::diagnose(&rec, &Options::default()).unwrap();
         let _ = std::fs::remove_dir_all(&dir);

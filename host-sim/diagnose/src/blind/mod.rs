@@ -232,6 +232,27 @@ impl Draw {
         })
     }
 
+    /// Simulates this record on `sc` (its device, effects, noise seed, rate table and die
+    /// warming, its out-of-library effect through the hook) and writes it to `path`, its
+    /// truth beside it.
+    pub fn write_record(&self, sc: &Scenario, path: &Path) -> anyhow::Result<record::RecordFiles> {
+        let opts = RecordOptions {
+            seed: Some(self.seed),
+            effects: self.effects.clone(),
+            rate_table: true,
+            temp: Some((25.0, self.temp_rise_k)),
+        };
+        record::write_simulated_record_ext(
+            &self.device.apply(sc),
+            path,
+            &opts,
+            self.hook(sc),
+            &mut |_| {},
+        )
+        .map(|(files, _)| files)
+        .with_context(|| format!("recording {}", self.id))
+    }
+
     /// The largest |size| / detection limit of its effects.
     pub fn size_over_limit(&self) -> f64 {
         let lib = self
@@ -306,18 +327,7 @@ pub fn run(
     par::try_map(
         &jobs,
         |(d, _)| format!("recording {}", d.id),
-        |(d, p)| {
-            let opts = RecordOptions {
-                seed: Some(d.seed),
-                effects: d.effects.clone(),
-                rate_table: true,
-                temp: Some((25.0, d.temp_rise_k)),
-            };
-            let dev = d.device.apply(&sc);
-            record::write_simulated_record_ext(&dev, p, &opts, d.hook(&sc), &mut |_| {})
-                .with_context(|| format!("recording {}", d.id))
-                .map(|_| ())
-        },
+        |(d, p)| d.write_record(&sc, p).map(|_| ()),
     )?;
     progress(&format!(
         "wrote {n} records in {:.0} s",
