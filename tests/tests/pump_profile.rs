@@ -2,8 +2,10 @@
 //! constraint, measured): the core's replica of the lock-in low-pass must assume the
 //! generator's profile. A DDS that steps once per sample while the core assumes a linear
 //! sweep destroys the estimate; the ZOH replica (`PumpProfile::Staircase`) recovers most of
-//! it but the steps still kick the ~100 Hz drive-envelope mode, so the firmware sweeps
-//! linearly (the AD9959's linear-sweep mode). README "Pump profile".
+//! it but leaves θ14 7 % and the rate 1.2 % biased. Two steps per sample (`half-steps`,
+//! the value 1/4 and 3/4 of the way, the boards' DDS pulsed at the sample and half a
+//! period later) follow the sweep closely enough for the core's linear replica and meet
+//! the scale-factor target. README "Pump profile".
 
 use paragyro_core::Estimator;
 use paragyro_core::config::PumpProfile;
@@ -59,4 +61,45 @@ fn a_stepping_pump_needs_the_matching_replica_and_still_costs_accuracy() {
         t14 > 0.02,
         "the steps still bias θ14 beyond the 2 % target: {t14:.2e}"
     );
+}
+
+/// Mean relative errors over 5–10 s of `identify` (f32, seed 1): θ14 and the fast rate.
+fn mean_errors(sim: PumpProfileSpec, core: PumpProfile) -> (f64, f64) {
+    let mut sc = Scenario::builtin("identify").unwrap();
+    sc.sim.pump_profile = sim;
+    let mut cfg = core_config(&sc);
+    cfg.pump_profile = core;
+    let mut est: Estimator<f32> = cfg.build().unwrap();
+    let (mut n, mut e14, mut er) = (0.0, 0.0, 0.0);
+    closed_loop(
+        &sc,
+        sc.seed,
+        &mut est,
+        |_| {},
+        |ls| {
+            if ls.t_s >= 5.0 {
+                let t14 = ls.est.theta().0[3];
+                e14 += t14 / ls.plant.theta_drive[3] - 1.0;
+                er += ls.out.rate.rate_dps / ls.plant.rate_dps - 1.0;
+                n += 1.0;
+            }
+        },
+    )
+    .unwrap();
+    (e14 / n, er / n)
+}
+
+#[test]
+fn two_steps_per_sample_follow_the_sweep_within_the_scale_factor_target() {
+    // measured: θ14 +0.28 %, rate −0.027 % (the linear sweep itself: +0.16 %, −0.026 %)
+    let (t14, rate) = mean_errors(PumpProfileSpec::HalfSteps, PumpProfile::Linear);
+    eprintln!("half-steps/linear: θ14 {t14:+.3e}, rate {rate:+.3e}");
+    assert!(
+        t14.abs() < 0.01 && rate.abs() < 1e-3,
+        "half-steps/linear: θ14 {t14:.2e}, rate {rate:.2e}"
+    );
+    // the one-step staircase with its exact replica, for contrast: rate +1.18 %
+    let (_, rate) = mean_errors(PumpProfileSpec::Staircase, PumpProfile::Staircase);
+    eprintln!("staircase/staircase: rate {rate:+.3e}");
+    assert!(rate > 5e-3, "staircase/staircase: rate {rate:.2e}");
 }

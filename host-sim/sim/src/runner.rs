@@ -44,6 +44,8 @@ pub fn core_config(sc: &Scenario) -> Config {
     c.pump_profile = match sc.sim.pump_profile {
         PumpProfileSpec::Linear => paragyro_core::config::PumpProfile::Linear,
         PumpProfileSpec::Staircase => paragyro_core::config::PumpProfile::Staircase,
+        // the two steps follow the sweep to within a quarter of a step: the FOH replica
+        PumpProfileSpec::HalfSteps => paragyro_core::config::PumpProfile::Linear,
     };
     // rows are weighted to unit noise; a noise-free run keeps the 1 pm/√Hz weighting
     c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 {
@@ -314,9 +316,11 @@ pub fn closed_loop_hooked<T: Real>(
     let w0 = sc.omega0_rad_s();
     let fs = est.config().fs_hz;
     let fx = dev.effects;
+    // half steps: the simulator advances in half intervals, each with its own pump
+    let substeps = sc.sim.pump_profile.sim_substeps();
     let simcfg = SimConfig {
         omega0_rad_s: w0,
-        fs_hz: fs,
+        fs_hz: fs * substeps as f64,
         steps_per_period: sc.sim.steps_per_period,
         omega_max: omega_max(sc, est.config()),
         lpf_order: sc.sim.lockin_lpf_order,
@@ -410,9 +414,9 @@ pub fn closed_loop_hooked<T: Real>(
             ay: pa1.accel_y,
         };
         // the pump sweeps linearly to the command, or (staircase) the command holds
-        // over the whole interval
+        // over the whole interval, or (half steps) two steps around the sweep
         let u0 = match sc.sim.pump_profile {
-            PumpProfileSpec::Linear => PlantInputs {
+            PumpProfileSpec::Linear | PumpProfileSpec::HalfSteps => PlantInputs {
                 omega: pump_hz / (2.0 * f0),
                 s: s_k,
                 ax: pa.accel_x,
@@ -427,10 +431,47 @@ pub fn closed_loop_hooked<T: Real>(
         let (mut u0, mut u1) = (u0, u1);
         let mut next = (out.pump_hz_next, out.pump_scale_next);
         hooks.inputs(k, &mut u0, &mut u1, &mut next);
-        sim.advance(&theta, &u0, &u1);
+        if sc.sim.pump_profile == PumpProfileSpec::HalfSteps {
+            advance_half_steps(&mut sim, &theta, &u0, &u1);
+        } else {
+            sim.advance(&theta, &u0, &u1);
+        }
         (pump_hz, scale_mult) = next;
     }
     Ok(())
+}
+
+/// One sample interval of a simulator built at twice the sample rate
+/// ([`PumpProfileSpec::HalfSteps`]): the pump (frequency and scale) holds the value 1/4 of
+/// the way from `u0` to `u1` over the first half and 3/4 over the second, the
+/// accelerations move linearly as in [`GyroSim::advance`].
+pub fn advance_half_steps(sim: &mut GyroSim, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
+    let at = |f: f64| PlantInputs {
+        omega: u0.omega + (u1.omega - u0.omega) * f,
+        s: u0.s + (u1.s - u0.s) * f,
+        ax: u0.ax + (u1.ax - u0.ax) * f,
+        ay: u0.ay + (u1.ay - u0.ay) * f,
+    };
+    let (mid, end) = (at(0.5), at(1.0));
+    let step = |f: f64, a: &PlantInputs, b: &PlantInputs| {
+        let held = at(f);
+        (
+            PlantInputs {
+                omega: held.omega,
+                s: held.s,
+                ..*a
+            },
+            PlantInputs {
+                omega: held.omega,
+                s: held.s,
+                ..*b
+            },
+        )
+    };
+    let (a0, a1) = step(0.25, u0, &mid);
+    sim.advance(theta, &a0, &a1);
+    let (b0, b1) = step(0.75, &mid, &end);
+    sim.advance(theta, &b0, &b1);
 }
 
 /// Runs one scenario (no twin) with the core in precision `T`.

@@ -73,6 +73,12 @@ pub fn simulate_record_ext(
     hook: Option<PlantHook>,
     progress: &mut dyn FnMut(f64),
 ) -> anyhow::Result<(Record, RecordTruth)> {
+    anyhow::ensure!(
+        sc.sim.pump_profile == crate::scenario::PumpProfileSpec::Linear,
+        "a record's pump sweeps linearly between samples (record-format.md); a scenario \
+         with pump_profile = {:?} cannot be recorded",
+        sc.sim.pump_profile
+    );
     let gamma_per_dps = paragyro_core::physics::gamma_from_rate_dps(1.0, sc.omega0_rad_s());
     let mut effects =
         Effects::from_specs(&opts.effects, gamma_per_dps).map_err(anyhow::Error::msg)?;
