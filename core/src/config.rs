@@ -23,6 +23,10 @@ pub enum PumpProfile {
     /// Each command holds over the whole interval that ends at its sample (a DDS updated
     /// once per sample, at the sample instant): the replica is ZOH-exact.
     Staircase,
+    /// The frequency moves in two steps per interval that are the linear sweep's means
+    /// over its halves (the firmware's `App::set_half_steps`), the scale holds each
+    /// command over the interval: FOH replica for the frequency, ZOH for the scale.
+    HalfSteps,
 }
 
 /// Pump-frequency dither (the excitation that makes all 14 parameters identifiable).

@@ -24,7 +24,8 @@
 //!    known pump of the next [`Sample`].
 //!
 //! The tick is bounded: two 30-byte frames, one 14-byte burst, one `step`, at most eight
-//! short DDS transactions; no allocation, no loop that depends on data, no panic. A
+//! short DDS transactions per step (sixteen with two steps per sample); no allocation,
+//! no loop that depends on data, no panic. A
 //! write is skipped when its word did not change, so a steady pump costs no DDS traffic.
 //!
 //! **Bad inputs are the core's business.** The firmware never drops a sample: a frame
@@ -43,35 +44,29 @@
 //! the next tick rewrites every word before it pulses again. After a bus fault the
 //! AD9959's serial port may also need its SYNC_IO pin; that belongs to the board.
 //!
-//! **Staircase against a linear sweep (known limitation).** The DDS steps its
-//! frequency at IO_UPDATE (to a word quantised to 2·f_SYSCLK/2³² ≈ 0.233 Hz at 500 MHz),
-//! while the core's replica of the lock-in low-pass is discretised first-order-hold
-//! exactly, i.e. it assumes the pump sweeps *linearly* from the value of one sample to the
-//! next ([`paragyro_core::lpf`]). The quantisation itself costs nothing systematic: the
-//! core is told the realised word. The *shape* does: with the pulse at τ ≈ 0.2–0.3 ms after
-//! DRDY, each new value is held over `[t_k + τ, t_(k+1) + τ)`, centred `T/2 − τ` ≈ 0.7–0.8
-//! ms *before* the sample instant the core attributes it to, where a linear sweep would be
-//! centred on it. The known pump deviation the core builds therefore lags the true one by
-//! about `T/2 − τ`: for the 5 Hz, ±21.6 Hz frequency dither an error of
-//! 2π·5 Hz·0.75 ms ≈ 2.4 % of the dither (≈ 0.5 Hz peak), in quadrature with it (the
-//! amplitude dither has the same lag). That is the kind of error the replica exists to
-//! remove (an uncompensated 2 ms lock-in delay makes row errors about ten times the
-//! Coriolis term); scaled linearly, a 0.75 ms mismatch would give a bias of a few
-//! Coriolis terms in the dither-identified θ. **Measured in the loop** (firmware/README.md,
-//! "Firmware in the loop"): on this stepping DDS a core told `Linear` never retunes
-//! (`drift-retune`: sense amplitude ratio 0.571), told `Staircase` (ZOH replica) it
-//! retunes (1.1865); the stm32f405 and `fil` boards therefore configure `Staircase`. The
-//! lag of the pulse within the interval is not modelled there. Two remedies for the
-//! remaining ZOH bias, both future work:
-//! * the AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, rising/falling
-//!   delta words and ramp rate, started by a profile pin at the sample instant) would make
-//!   the realised pump a linear sweep, but its 8-bit ramp rate (≤ 2.04 µs per step) and
-//!   0.116 Hz delta resolution make its slowest sweep ≈ 57 kHz/s, far above the core's
-//!   ≈ 680 Hz/s: it would reach each word within ≈ 25 µs and hold (a staircase again);
-//! * cheaper: pulse IO_UPDATE from a timer at DRDY + T/2 (an [`IoUpdate`] implementation
-//!   may arm such a timer instead of toggling a pin): the staircase is then centred on the
-//!   sample instants and agrees with the linear sweep to second order (no lag; a
-//!   `sinc` against `sinc²` amplitude difference of ~2e-4 at 5 Hz).
+//! **Two steps per sample ([`App::set_half_steps`], the stm32f405 and `fil` boards).** The
+//! DDS steps its frequency at IO_UPDATE (to a word quantised to 2·f_SYSCLK/2³² ≈ 0.233 Hz
+//! at 500 MHz), while the core's replica of the lock-in low-pass for the frequency is
+//! first-order-hold exact: it assumes the pump sweeps *linearly* from one sample's value
+//! to the next ([`paragyro_core::lpf`]). One step per sample with the core's ZOH replica
+//! (`PumpProfile::Staircase`) costs a rate bias of +1.2 % on `identify` (README "Pump
+//! profile"), +0.9 to +1.8 % in the loop; with the FOH replica the core fails (test
+//! `a_linear_replica_on_the_stepping_dds_fails`). So each tick writes and pulses a first
+//! step and buffers a second, which [`IoUpdate::pulse_at_half_period`] applies half a
+//! period after DRDY. The steps are chosen so that they are *exactly* the means of a
+//! linear sweep over the two halves of the interval (whole words, `App::half_steps_to`'s
+//! half-word node grid), and the next sample is told that sweep's node: the core's FOH
+//! replica then sees what the DDS does. The amplitude is one step per sample, told to the
+//! core's ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its
+//! own half steps could not be exact means (the amplitude steps are below one word a
+//! tick). Measured in the loop (firmware/README.md "Firmware in the loop"): the rate's
+//! scale factor over the last second +0.26 % (`drift-retune`), −0.22 % (`rate-step`),
+//! −0.11 % (`startup`), against +0.91 %, +1.83 % and +1.13 % with one step. Not modelled
+//! in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
+//! AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, delta words and ramp
+//! rate) cannot replace the steps: its 8-bit ramp rate (≤ 2.04 µs per step) and 0.116 Hz
+//! delta resolution make its slowest sweep ≈ 57 kHz/s, far above the core's ≈ 680 Hz/s:
+//! it would reach each word within ≈ 25 µs and hold (a staircase again).
 //!
 //! **The guard.** The core keeps the pump inside the drive's parametric band by itself
 //! (its retune targets stay a margin inside the band, and it never ramps outside). The
@@ -98,6 +93,13 @@ use crate::drivers::adxl355::Adxl355;
 pub trait IoUpdate {
     /// Pulse IO_UPDATE once.
     fn pulse(&mut self);
+
+    /// Pulse IO_UPDATE once, half a sample period after the sample instant (DRDY), for
+    /// the second of [`App::set_half_steps`]' two steps; false if this line cannot (the
+    /// default: the buffered words then wait for the next tick, and the App counts it).
+    fn pulse_at_half_period(&mut self) -> bool {
+        false
+    }
 }
 
 impl<F: FnMut()> IoUpdate for F {
@@ -176,15 +178,28 @@ impl PumpGuard {
     /// The DDS plan for `hz` clamped to the window, with a realised pump inside the
     /// window: if rounding to the word grid would leave it, the next word inwards. `None`
     /// if no pump word fits (window narrower than a step) or the DDS cannot make it.
+    ///
+    /// The word is `k = round(f/2 · 2^32 / f_SYSCLK)` as [`PumpPlan::new`] rounds it (the
+    /// same quotient, rounded once: `f / (2·f_SYSCLK/2^32)`), stepped in whole words, so
+    /// the image needs neither `PumpPlan::new` nor a second rounding (flash budget).
     pub fn plan(&self, hz: f64, sysclk_hz: f64) -> Option<PumpPlan> {
-        let plan = PumpPlan::new(self.clamp(hz), sysclk_hz).ok()?;
+        // 0 < f_SYSCLK ≤ 500 MHz, finite: positive doubles order like their bits (−0,
+        // negatives, ∞ and NaN fall outside), no soft-float comparisons
+        if !(1..=ad9959::MAX_SYSCLK_HZ.to_bits()).contains(&sysclk_hz.to_bits()) {
+            return None;
+        }
         // one pump step: the pump word 2k moves by 2
         let step = 2.0 * sysclk_hz / FTW_SCALE;
+        // saturating: NaN and negatives give 0 (no plan), huge values u32::MAX (none)
+        let k = (self.clamp(hz) / step + 0.5) as u32;
+        let plan = PumpPlan::from_reference_ftw(k, sysclk_hz)?;
         let realised = plan.pump_hz();
         let plan = if realised > self.max_hz {
-            PumpPlan::new(realised - step, sysclk_hz).ok()?
+            // k > 0 (a plan): no wrap
+            PumpPlan::from_reference_ftw(k.wrapping_sub(1), sysclk_hz)?
         } else if realised < self.min_hz {
-            PumpPlan::new(realised + step, sysclk_hz).ok()?
+            // 3k < 2^31 (a plan): no wrap
+            PumpPlan::from_reference_ftw(k.wrapping_add(1), sysclk_hz)?
         } else {
             plan
         };
@@ -350,6 +365,8 @@ pub struct App<AX, AY, XL, DDS> {
     /// Pump Hz per reference word, `2·f_SYSCLK / 2^32` (exact: a power-of-two scaling),
     /// so that [`App::guard_plan`] needs one `f64` division and no multiplication.
     hz_per_ref_word: f64,
+    /// Half of it (a half word of the two steps' nodes).
+    hz_per_half_word: f64,
     /// The guard's ends as `f64` bit patterns: for a validated guard (`0 < min ≤ max`,
     /// finite) `min ≤ hz ≤ max` ⇔ `min_bits ≤ hz_bits ≤ max_bits` for every `hz` (positive
     /// doubles order like their bits; negatives, −0 and NaN fall outside), so the tick's
@@ -360,7 +377,17 @@ pub struct App<AX, AY, XL, DDS> {
     lockin_beyond_um: f32,
     /// An acceleration beyond the core's full scale, m/s².
     accel_beyond_mps2: f32,
+    /// The pump the next sample is told: the DDS's words, or with two steps per sample
+    /// the node the steps follow (its `pump_hz`; `plan` is then the second step's).
     pump: Option<InEffect>,
+    /// The words in the DDS's active registers (the last pulse's), reference word and
+    /// amplitude: what a write is skipped against.
+    active: Option<(u32, AmplitudeWord)>,
+    /// Two steps per sample ([`App::set_half_steps`]).
+    half_steps: bool,
+    /// With two steps: twice the node's reference word (a half-word grid); `None` after
+    /// an error (the next command is one step).
+    node: Option<i32>,
     /// The DDS buffers may differ from the words in effect: rewrite all before a pulse.
     dirty: bool,
     counters: FwCounters,
@@ -591,11 +618,15 @@ where
             guard: PumpGuard::new(0.0, 0.0),
             guard_words: (0, 0),
             hz_per_ref_word: 1.0,
+            hz_per_half_word: 0.5,
             guard_bits: (0, 0),
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: 0.0,
             accel_beyond_mps2: 0.0,
             pump: None,
+            active: None,
+            half_steps: false,
+            node: None,
             dirty: true,
             counters: FwCounters::default(),
             last: Sample {
@@ -630,6 +661,7 @@ where
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
         self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
+        self.hz_per_half_word = sysclk * (1.0 / FTW_SCALE);
         self.guard_bits = (guard.min_hz.to_bits(), guard.max_hz.to_bits());
         self.est.rebuild(valid);
         self.cal_x = cal_x;
@@ -639,6 +671,8 @@ where
         self.lockin_beyond_um = beyond(cfg.monitor.full_scale_um);
         self.accel_beyond_mps2 = beyond(cfg.monitor.accel_full_scale_mps2);
         self.pump = None;
+        self.active = None;
+        self.node = None;
         self.dirty = true;
         self.counters = FwCounters::default();
         self.last = Sample {
@@ -660,6 +694,20 @@ where
             limit: reads,
             ..StuckAccel::default()
         };
+    }
+
+    /// Two DDS steps per sample (off by default, kept by [`App::configure`]): each tick
+    /// writes the words 1/4 of the way from the pump in effect to the new command and
+    /// pulses IO_UPDATE, then buffers the words 3/4 of the way (frequency word and
+    /// amplitude, rounded to the nearest word) for [`IoUpdate::pulse_at_half_period`].
+    /// Each step holds the mean of the linear sweep over its half of the interval, so the
+    /// core keeps its linear (FOH) replica, `PumpProfile::Linear` (README "Pump profile":
+    /// the one-step staircase biases the rate by 1.2 %). The next sample is told the new
+    /// command's realised pump, the node of that sweep; after a failed write or a pulse
+    /// the line cannot make, the words the DDS holds. The first command after a start or
+    /// an error is one step.
+    pub fn set_half_steps(&mut self, on: bool) {
+        self.half_steps = on;
     }
 
     /// Changes the amplitude mapping (validated; field `"pump_amplitude"`). The next
@@ -790,10 +838,81 @@ where
             self.dirty = true;
             return faults | fault::DDS;
         };
-        if self.apply(plan, asf, io).is_err() {
-            faults |= fault::DDS;
+        let node = self.node.filter(|_| self.half_steps && !self.dirty);
+        let steps = node.and_then(|n| self.half_steps_to(n, plan));
+        let Some((pa, pb, word2)) = steps else {
+            // one step: the first command, after an error, or steps that would leave the
+            // guard or the amplitude range
+            if self.apply(plan, asf, io).is_err() {
+                self.node = None;
+                return faults | fault::DDS;
+            }
+            self.node = self
+                .half_steps
+                .then(|| (plan.reference_ftw() as i32).wrapping_mul(2));
+            return faults;
+        };
+        if self.step_now(pa, asf, io).is_err() {
+            return faults | self.hold_active();
         }
+        let held = match self.load(pb, asf) {
+            Ok(()) if self.chips.dds.take_io_update().is_none() => true,
+            Ok(()) if io.pulse_at_half_period() => {
+                self.active = Some((pb.reference_ftw(), asf));
+                true
+            }
+            // the line cannot pulse later, or the write failed: the DDS holds the first
+            // step, the next sample is told so, the next tick rewrites all
+            Ok(()) | Err(_) => {
+                bump(&mut self.counters.dds_errors);
+                self.dirty = true;
+                false
+            }
+        };
+        if !held {
+            return faults | self.hold_active();
+        }
+        self.node = Some(word2);
+        // k·(2·f_SYSCLK/2^32) with k = word2/2: the same product, rounded once and scaled
+        // by powers of two (a node on the word grid is told its word's pump)
+        let pump_hz = f64::from(word2 as u32) * self.hz_per_half_word;
+        self.pump = Some(InEffect {
+            plan: pb,
+            asf,
+            pump_hz,
+        });
         faults
+    }
+
+    /// The two frequency steps from the node `n` towards the command `plan`: the first
+    /// `A = round((3p + c)/4)` (p the node, c the command, in reference words), the second
+    /// `B = 3A − 2p` and the new node `p' = 4A − 3p`, so that A and B are exactly the
+    /// means of the linear sweep p → p' over the two halves of the interval: the sweep the
+    /// core's replica assumes. (Whole words cannot make the 1/4 and 3/4 points of p → c;
+    /// their rounding, ±½ word, would be a pump error the core is not told.) Nodes lie on
+    /// a half-word grid within 2 words of the command. The amplitude is one step, the
+    /// command's word over the whole interval (the core's ZOH replica of the scale,
+    /// `PumpProfile::HalfSteps`). `None` if a step or the node would leave the guard, or
+    /// for a word of 2^27 or more (a pump above f_SYSCLK/16: one step, no overflow).
+    fn half_steps_to(&self, node2: i32, plan: PumpPlan) -> Option<(PumpPlan, PumpPlan, i32)> {
+        let c = plan.reference_ftw() as i32;
+        // below 2^27 and 2^28 every product and sum here stays below 2^31
+        if !(0..1 << 27).contains(&c) || !(0..1 << 28).contains(&node2) {
+            return None;
+        }
+        let w = |k: i32, x: i32| k.wrapping_mul(x);
+        let a = w(3, node2).wrapping_add(w(2, c)).wrapping_add(4) >> 3;
+        let b = w(3, a).wrapping_sub(node2);
+        let word2 = w(8, a).wrapping_sub(w(3, node2));
+        let (lo, hi) = (self.guard_words.0 as i32, self.guard_words.1 as i32);
+        let inside = lo <= a.min(b) && a.max(b) <= hi && w(2, lo) <= word2 && word2 <= w(2, hi);
+        if !inside {
+            return None;
+        }
+        let sysclk = self.chips.dds.sysclk_hz();
+        let pa = PumpPlan::from_reference_ftw(a as u32, sysclk)?;
+        let pb = PumpPlan::from_reference_ftw(b as u32, sysclk)?;
+        Some((pa, pb, word2))
     }
 
     /// [`PumpGuard::contains`] of the configured guard by its bit patterns (`guard_bits`).
@@ -832,29 +951,37 @@ where
         asf: AmplitudeWord,
         io: &mut IO,
     ) -> Result<(), ad9959::Error<DDS::Error>> {
-        let all = self.dirty;
+        // (with two steps `pump_hz` may be a node's, not its plan's)
         let same_word = self
             .pump
-            .filter(|p| p.plan.reference_ftw() == plan.reference_ftw());
-        let freq = all || same_word.is_none();
-        let amp = all || self.pump.is_none_or(|p| p.asf != asf);
-        match write_pump(
-            &mut self.chips.dds,
-            freq.then_some(&plan),
-            amp.then_some(asf),
-        ) {
+            .filter(|p| !self.half_steps && p.plan.reference_ftw() == plan.reference_ftw());
+        self.step_now(plan, asf, io)?;
+        // = plan.pump_hz() bit for bit: 2k·f_SYSCLK/2^32 = k·(2·f_SYSCLK/2^32), the
+        // same product rounded once and scaled by powers of two (one multiplication
+        // fewer)
+        let pump_hz = same_word.map_or_else(
+            || f64::from(plan.reference_ftw()) * self.hz_per_ref_word,
+            |p| p.pump_hz,
+        );
+        self.pump = Some(InEffect { plan, asf, pump_hz });
+        Ok(())
+    }
+
+    /// Loads the words that differ from the active ones and pulses IO_UPDATE if any was
+    /// written; the DDS then holds them (`active`). On an error: no pulse, counted, every
+    /// word rewritten next time.
+    fn step_now<IO: IoUpdate + ?Sized>(
+        &mut self,
+        plan: PumpPlan,
+        asf: AmplitudeWord,
+        io: &mut IO,
+    ) -> Result<(), ad9959::Error<DDS::Error>> {
+        match self.load(plan, asf) {
             Ok(()) => {
                 if self.chips.dds.take_io_update().is_some() {
                     io.pulse();
                 }
-                // = plan.pump_hz() bit for bit: 2k·f_SYSCLK/2^32 = k·(2·f_SYSCLK/2^32), the
-                // same product rounded once and scaled by powers of two (one multiplication
-                // fewer)
-                let pump_hz = same_word.map_or_else(
-                    || f64::from(plan.reference_ftw()) * self.hz_per_ref_word,
-                    |p| p.pump_hz,
-                );
-                self.pump = Some(InEffect { plan, asf, pump_hz });
+                self.active = Some((plan.reference_ftw(), asf));
                 self.dirty = false;
                 Ok(())
             }
@@ -866,8 +993,41 @@ where
         }
     }
 
+    /// After a failed step: the next sample is told the words the DDS holds (a cold path:
+    /// the one place two steps compute the held pump).
+    fn hold_active(&mut self) -> u8 {
+        self.node = None;
+        if let Some((k, asf)) = self.active
+            && let Some(plan) = PumpPlan::from_reference_ftw(k, self.chips.dds.sysclk_hz())
+        {
+            let pump_hz = f64::from(k) * self.hz_per_ref_word;
+            self.pump = Some(InEffect { plan, asf, pump_hz });
+        }
+        fault::DDS
+    }
+
+    /// Writes into the DDS's buffers the words that differ from its active ones (all of
+    /// them after an error or a mapping change), stopping at the first error. Not inlined:
+    /// one copy for both steps (the stm32f405 image's 64 KiB flash budget).
+    #[inline(never)]
+    fn load(
+        &mut self,
+        plan: PumpPlan,
+        asf: AmplitudeWord,
+    ) -> Result<(), ad9959::Error<DDS::Error>> {
+        let all = self.dirty;
+        let freq = all || self.active.is_none_or(|a| a.0 != plan.reference_ftw());
+        let amp = all || self.active.is_none_or(|a| a.1 != asf);
+        write_pump(
+            &mut self.chips.dds,
+            freq.then_some(&plan),
+            amp.then_some(asf),
+        )
+    }
+
     /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before
-    /// the first successful DDS write.
+    /// the first successful DDS write. With two steps per sample ([`App::set_half_steps`])
+    /// the node of the linear sweep the steps follow (on a half-word grid).
     pub fn pump_hz(&self) -> f64 {
         self.pump.map_or(f64::NAN, |p| p.pump_hz)
     }

@@ -49,6 +49,9 @@ use crate::table::{CFG_SLOTS, config_from_slots, control};
 pub const ACCEL_BURST: usize = 13;
 /// Capacity of the DDS byte log of one exchange.
 pub const DDS_LOG_BYTES: usize = 192;
+/// The DDS log's marker of an IO_UPDATE pulse half a period after DRDY (a write's length
+/// byte is at most a few bytes; 0 marks a pulse now).
+pub const HALF_PERIOD_PULSE: u8 = 0xFF;
 /// Identical ADXL355 X and Y codes in a row that the `fil` board refuses as stuck (the
 /// host's accelerometer carries the ADXL355's noise).
 pub const ACCEL_STUCK_READS: u32 = 8;
@@ -66,6 +69,12 @@ pub const FROM_FW_BYTES: usize = 4 + 8 + 4 + 5 * 8 + (COUNTERS + 3) * 4 + 2 + DD
 pub const TICK_SETUP: u32 = u32::MAX;
 /// [`FromFw::tick`] of the answer to the end message.
 pub const TICK_END: u32 = u32::MAX - 1;
+
+/// Bits of [`Init::flags`].
+pub mod init_flag {
+    /// Two DDS steps per sample ([`crate::app::App::set_half_steps`]).
+    pub const HALF_STEPS: u32 = 1;
+}
 
 /// Bits of [`ToFw::flags`].
 pub mod flag {
@@ -151,6 +160,8 @@ pub struct Init {
     pub um_per_volt: [f32; 2],
     /// ADXL355 range bits (1: ±2 g, 2: ±4 g, 3: ±8 g).
     pub accel_range_bits: u32,
+    /// Board options ([`init_flag`]).
+    pub flags: u32,
     /// Half-width of the pump guard around the configured centre, Hz.
     pub guard_half_width_hz: f64,
     /// Pump scale of the amplitude mapping's base and of the full DDS word.
@@ -172,7 +183,7 @@ impl Init {
         p.f32(self.um_per_volt[0]);
         p.f32(self.um_per_volt[1]);
         p.u32(self.accel_range_bits);
-        p.u32(0);
+        p.u32(self.flags);
         p.f64(self.guard_half_width_hz);
         p.f32(self.amplitude[0]);
         p.f32(self.amplitude[1]);
@@ -191,13 +202,14 @@ impl Init {
         }
         let um_per_volt = [g.f32(), g.f32()];
         let accel_range_bits = g.u32();
-        let _ = g.u32();
+        let flags = g.u32();
         let guard_half_width_hz = g.f64();
         let amplitude = [g.f32(), g.f32()];
         Some(Self {
             cfg_slots,
             um_per_volt,
             accel_range_bits,
+            flags,
             guard_half_width_hz,
             amplitude,
         })
@@ -419,13 +431,24 @@ impl FromFw {
         }
     }
 
-    /// The DDS log's entries: `Some(bytes)` for a write, `None` for an IO_UPDATE pulse.
+    /// The DDS log's entries in order: writes and IO_UPDATE pulses.
     pub fn dds_entries(&self) -> DdsEntries<'_> {
         let len = usize::from(self.dds_log_len).min(DDS_LOG_BYTES);
         DdsEntries {
             log: self.dds_log.get(..len).unwrap_or(&[]),
         }
     }
+}
+
+/// One entry of a DDS log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DdsEntry<'a> {
+    /// The bytes of one SPI write.
+    Write(&'a [u8]),
+    /// IO_UPDATE pulsed now.
+    Pulse,
+    /// IO_UPDATE armed for half a sample period after DRDY.
+    HalfPeriodPulse,
 }
 
 /// Iterator over a DDS log ([`FromFw::dds_entries`]).
@@ -435,17 +458,21 @@ pub struct DdsEntries<'a> {
 }
 
 impl<'a> Iterator for DdsEntries<'a> {
-    type Item = Option<&'a [u8]>;
+    type Item = DdsEntry<'a>;
     fn next(&mut self) -> Option<Self::Item> {
         let (&n, rest) = self.log.split_first()?;
-        if n == 0 {
+        if n == 0 || n == HALF_PERIOD_PULSE {
             self.log = rest;
-            return Some(None);
+            return Some(if n == 0 {
+                DdsEntry::Pulse
+            } else {
+                DdsEntry::HalfPeriodPulse
+            });
         }
         let n = usize::from(n).min(rest.len());
         let (w, rest) = rest.split_at(n);
         self.log = rest;
-        Some(Some(w))
+        Some(DdsEntry::Write(w))
     }
 }
 
@@ -564,6 +591,12 @@ impl FilBus {
     /// An IO_UPDATE pulse, in order with the writes.
     pub fn pulse(&self) {
         self.log_push(&[0]);
+    }
+
+    /// An IO_UPDATE pulse armed for half a sample period after DRDY (the log's order:
+    /// after this tick's writes).
+    pub fn pulse_half(&self) {
+        self.log_push(&[HALF_PERIOD_PULSE]);
     }
 
     /// Moves the DDS log into `out` and empties it; false if it overflowed since the
@@ -744,6 +777,14 @@ impl IoUpdate for FilIo<'_> {
         self.pulses = self.pulses.saturating_add(1);
         fake_exit();
     }
+
+    fn pulse_at_half_period(&mut self) -> bool {
+        fake_enter();
+        self.bus.pulse_half();
+        self.pulses = self.pulses.saturating_add(1);
+        fake_exit();
+        true
+    }
 }
 
 #[cfg(test)]
@@ -756,6 +797,7 @@ mod tests {
             cfg_slots: core::array::from_fn(|i| i as f64 * 1.5),
             um_per_volt: [8.0, 4.0],
             accel_range_bits: 3,
+            flags: init_flag::HALF_STEPS,
             guard_half_width_hz: 400.0,
             amplitude: [1.0, 1.5625],
         };
@@ -773,12 +815,19 @@ mod tests {
         f.tick = 3;
         f.wy2 = 1.03;
         f.counters[4] = 17;
-        f.dds_log[..4].copy_from_slice(&[2, 0x00, 0xF2, 0]);
-        f.dds_log_len = 4;
+        f.dds_log[..5].copy_from_slice(&[2, 0x00, 0xF2, 0, HALF_PERIOD_PULSE]);
+        f.dds_log_len = 5;
         let g = FromFw::decode(&f.encode());
         assert_eq!(g.tick, 3);
         assert_eq!(g.counters, f.counters);
         let e: Vec<_> = g.dds_entries().collect();
-        assert_eq!(e, vec![Some(&[0x00u8, 0xF2][..]), None]);
+        assert_eq!(
+            e,
+            vec![
+                DdsEntry::Write(&[0x00u8, 0xF2][..]),
+                DdsEntry::Pulse,
+                DdsEntry::HalfPeriodPulse
+            ]
+        );
     }
 }

@@ -108,7 +108,7 @@ pub mod cfg {
     pub const LOCKIN_LPF_ORDER: usize = 3;
     pub const LOCKIN_LPF_HZ: usize = 4;
     pub const PUMP_AMP_REF_V: usize = 5;
-    /// 0 linear, 1 staircase.
+    /// 0 linear, 1 staircase, 2 half steps.
     pub const PUMP_PROFILE: usize = 6;
     /// μx, μy, μxy, ωx², ωy², ωxy², αx, αy, β1, β3, γ, γ', c_ax, c_ay (14 slots).
     pub const NOMINAL: usize = 7;
@@ -253,7 +253,11 @@ pub fn config_slots(c: &Config) -> [f64; CFG_SLOTS] {
     s[cfg::LOCKIN_LPF_ORDER] = c.lockin_lpf_order as f64;
     s[cfg::LOCKIN_LPF_HZ] = c.lockin_lpf_hz;
     s[cfg::PUMP_AMP_REF_V] = c.pump_amp_ref_v;
-    s[cfg::PUMP_PROFILE] = b(c.pump_profile == PumpProfile::Staircase);
+    s[cfg::PUMP_PROFILE] = match c.pump_profile {
+        PumpProfile::Linear => 0.0,
+        PumpProfile::Staircase => 1.0,
+        PumpProfile::HalfSteps => 2.0,
+    };
     let n = &c.nominal;
     let nominal = [
         n.mu_x, n.mu_y, n.mu_xy, n.wx2, n.wy2, n.wxy2, n.alpha_x, n.alpha_y, n.beta1, n.beta3,
@@ -291,8 +295,11 @@ pub fn config_from_slots(slot: impl Fn(usize) -> f64) -> Config {
     c.lockin_lpf_order = s(cfg::LOCKIN_LPF_ORDER) as usize;
     c.lockin_lpf_hz = s(cfg::LOCKIN_LPF_HZ);
     c.pump_amp_ref_v = s(cfg::PUMP_AMP_REF_V);
-    c.pump_profile = if flag(cfg::PUMP_PROFILE) {
+    let profile = s(cfg::PUMP_PROFILE);
+    c.pump_profile = if profile == 1.0 {
         PumpProfile::Staircase
+    } else if profile == 2.0 {
+        PumpProfile::HalfSteps
     } else {
         PumpProfile::Linear
     };

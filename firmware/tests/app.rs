@@ -1059,3 +1059,80 @@ fn unconfigured_app_cannot_start_and_configured_app_equals_new() {
     }
     assert_eq!(app.estimator().theta(), reference.estimator().theta());
 }
+
+// ------------------------------------------------------------------------------------------
+// (5) two DDS steps per sample
+
+/// An IO_UPDATE line that can pulse half a period later: it records the DDS's pump
+/// before the half-period pulse (the first half of the interval) and then applies it.
+struct HalfIo<'a> {
+    cap: &'a DdsCapture,
+    first_half: Option<(u32, u16)>,
+}
+
+impl IoUpdate for HalfIo<'_> {
+    fn pulse(&mut self) {
+        self.cap.pulse();
+    }
+
+    fn pulse_at_half_period(&mut self) -> bool {
+        let a = self.cap.active();
+        self.first_half = Some((a.ftw_of(Channel::PUMP), a.asf_of(Channel::PUMP).get()));
+        self.cap.pulse();
+        true
+    }
+}
+
+/// Each tick's two steps are exactly the means, over the two halves of the interval, of
+/// the linear sweep between the pumps the core is told at this sample and the next (so
+/// the core's linear replica sees what the DDS does, rounding included); the told pump
+/// stays within two words of the guard's word for the command; the references stay
+/// phase-locked; the estimator gets what a bare one given those pumps gets.
+#[test]
+fn two_steps_per_sample_are_the_half_means_of_the_sweep_the_core_is_told() {
+    let n = F + 300;
+    let d = data(n);
+    let cap = DdsCapture::new(SYSCLK);
+    let mut app = clean(&d, &cap);
+    app.set_half_steps(true);
+    let mut io = HalfIo {
+        cap: &cap,
+        first_half: None,
+    };
+    let mut reference = Reference::new();
+    app.start(&mut io).unwrap();
+    let (mut pump, mut scale) = (app.pump_hz(), app.pump_scale());
+    // pump words (2k) of a told pump, exact: Hz per pump word is a power-of-two scaling
+    let words = |hz: f64| hz / PUMP_STEP_HZ;
+    let mut two = 0;
+    let mut worst: f64 = 0.0;
+    for k in 0..n {
+        io.first_half = None;
+        // the word the guard gives the command this tick executes
+        let r = app.tick(&mut io);
+        let command = app
+            .guard()
+            .plan(r.out.pump_hz_next, SYSCLK)
+            .unwrap()
+            .reference_ftw();
+        let out = reference.est.step(&reference.sample(&d, k, pump, scale));
+        same_output(&r.out, &out, k);
+        assert_eq!(r.faults, 0, "tick {k}");
+        assert!(cap.active().phase_locked());
+        let (p0, p1) = (words(pump), words(r.pump_hz));
+        let second = f64::from(cap.active().ftw_of(Channel::PUMP)) / 2.0;
+        let first = io.first_half.map_or(second, |(w, _)| f64::from(w) / 2.0);
+        if k > 0 {
+            assert_eq!(first, p0 + 0.25 * (p1 - p0), "tick {k}: the first step");
+            assert_eq!(second, p0 + 0.75 * (p1 - p0), "tick {k}: the second step");
+            worst = worst.max((p1 - f64::from(command)).abs());
+        }
+        two += usize::from(io.first_half.is_some());
+        pump = r.pump_hz;
+        scale = r.pump_scale;
+    }
+    // the dither moves the pump by several words a tick once it is on (from 1 s)
+    assert!(two > 250, "{two} ticks with two steps");
+    assert!(worst <= 2.0, "the told pump {worst} words from the command");
+    assert_eq!(app.counters().dds_errors, 0);
+}

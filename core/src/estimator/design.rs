@@ -47,8 +47,10 @@ pub(crate) struct Units<T> {
     pub inv_l0: T,
     /// 1/(L0·ω0²) (m/s² → ã).
     pub accel_nd: T,
-    /// The pump generator holds each command (staircase): the replica is ZOH.
+    /// The pump generator holds each frequency command (staircase): the replica is ZOH.
     pub staircase: bool,
+    /// The pump generator holds each scale command: its replica is ZOH.
+    pub scale_held: bool,
 }
 
 impl<T: Real> Units<T> {
@@ -68,6 +70,7 @@ impl<T: Real> Units<T> {
             inv_l0: T::from_f64(1.0 / cfg.l0_um),
             accel_nd: T::from_f64(1.0 / (cfg.l0_um * 1e-6 * omega0 * omega0)),
             staircase: cfg.pump_profile == PumpProfile::Staircase,
+            scale_held: cfg.pump_profile != PumpProfile::Linear,
         }
     }
 

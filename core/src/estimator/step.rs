@@ -161,7 +161,7 @@ impl<T: Real> State<T> {
             om: u.om_ref_t + f_dom,
             dom2: rep.dom2.update_with(co, dom2, hold),
             omd: rep.dom.derivative(co),
-            ds: rep.ds.update_with(co, ds, hold),
+            ds: rep.ds.update_with(co, ds, u.scale_held),
             ax: rep.ax.update(co, acc[0]),
             ay: rep.ay.update(co, acc[1]),
         };

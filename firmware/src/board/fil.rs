@@ -164,6 +164,7 @@ fn configure(app: &mut FilApp<'_>, init: &Init, io: &mut FilIo<'_>) -> bool {
         return false;
     }
     app.set_accel_stuck_limit(fil::ACCEL_STUCK_READS);
+    app.set_half_steps(init.flags & fil::init_flag::HALF_STEPS != 0);
     if let Err(e) = app.start(io) {
         defmt::error!("fil: starting the pump failed: {}", defmt::Debug2Format(&e));
         return false;

@@ -25,8 +25,13 @@
 //! **Calibration.** [`CAL_X_UM_PER_VOLT`] and [`CAL_Y_UM_PER_VOLT`] are the analog
 //! front end's design scale (the values the replay table uses); a built board replaces
 //! them by its bench calibration. **Pump profile**: the configuration is `Config::table2()`
-//! with `pump_profile = Staircase`, what this board's DDS does (written and pulsed once
-//! per tick). Compile-checked in CI only: no board has run it yet.
+//! (`pump_profile = Linear`) with the App's two DDS steps per sample
+//! ([`App::set_half_steps`]): each tick writes and pulses the first step, buffers the
+//! second, and the loop pulses IO_UPDATE again [`HALF_PERIOD_CYCLES`] after the tick
+//! began (DWT-timed; the board polls DRDY and has nothing else to do). Compile-checked in
+//! CI only: no board has run it yet; the `fil` board runs the same App logic in the loop.
+//!
+//! [`App::set_half_steps`]: paragyro_firmware::app::App::set_half_steps
 //!
 //! [`App::tick`]: paragyro_firmware::app::App::tick
 
@@ -38,8 +43,7 @@ use embedded_hal::spi::SpiDevice;
 use embedded_hal_bus::spi::{AtomicDevice, ExclusiveDevice};
 use embedded_hal_bus::util::AtomicCell;
 use paragyro_core::Config;
-use paragyro_core::config::PumpProfile;
-use paragyro_firmware::app::{App, Chips, PinIoUpdate, PumpAmplitude, PumpGuard};
+use paragyro_firmware::app::{App, Chips, IoUpdate, PinIoUpdate, PumpAmplitude, PumpGuard};
 use paragyro_firmware::drivers::ad9959::Ad9959;
 use paragyro_firmware::drivers::ads131m08::{self, Ads131m08};
 use paragyro_firmware::drivers::adxl355::{Adxl355, HighPass, Odr, Range};
@@ -62,6 +66,25 @@ pub const CAL_Y_UM_PER_VOLT: f32 = 4.0;
 const GUARD_HALF_WIDTH_HZ: f64 = 400.0;
 /// A DRDY missing for this many cycles (4 ms, two periods) is counted as a timeout.
 const DRDY_TIMEOUT_CYCLES: u32 = SYSCLK_HZ / 250;
+/// Half a 500 Hz sample period in core cycles: the second IO_UPDATE of the two DDS steps.
+const HALF_PERIOD_CYCLES: u32 = SYSCLK_HZ / 1000;
+
+/// IO_UPDATE now, or armed for the main loop to pulse half a period after the tick began.
+struct HalfPeriodIo<P> {
+    pin: PinIoUpdate<P>,
+    armed: bool,
+}
+
+impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
+    fn pulse(&mut self) {
+        self.pin.pulse();
+    }
+
+    fn pulse_at_half_period(&mut self) -> bool {
+        self.armed = true;
+        true
+    }
+}
 
 /// The warm start on this board (feature `warm-start`: it does not fit the 64 KiB image
 /// budget yet, firmware/README.md "Warm start on the stm32f405 board").
@@ -305,7 +328,10 @@ fn main() -> ! {
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
-    let mut io = PinIoUpdate(gpiob.pb1.into_push_pull_output());
+    let mut io = HalfPeriodIo {
+        pin: PinIoUpdate(gpiob.pb1.into_push_pull_output()),
+        armed: false,
+    };
 
     let mut delay = CycleDelay;
     let adc_x = init_adc(adc_x_dev, &mut delay);
@@ -313,16 +339,15 @@ fn main() -> ! {
     let accel = init_accel(accel_dev);
     let mut dds = init_dds(dds_dev);
     if dds.take_io_update().is_some() {
-        use paragyro_firmware::app::IoUpdate;
         io.pulse();
     }
 
-    // The AD9959 is written once per tick without its linear-sweep mode: the pump steps at
-    // IO_UPDATE and holds, so the core's replica must assume a staircase (measured in the
-    // loop, firmware/README.md "Firmware in the loop": with the `Linear` replica the
-    // retune never happens and the sense amplitude falls to 0.57 of its start).
+    // The AD9959 steps at IO_UPDATE (its linear-sweep mode cannot sweep as slowly as the
+    // core commands: app.rs). Two steps per sample, 1/4 and 3/4 of the way, follow the
+    // linear sweep the core's default replica assumes (README "Pump profile": rate −0.027 %
+    // on identify, against +1.2 % for one step with the ZOH replica).
     let mut cfg = Config::table2();
-    cfg.pump_profile = PumpProfile::Staircase;
+    cfg.pump_profile = paragyro_core::config::PumpProfile::HalfSteps;
     let chips = Chips {
         adc_x,
         adc_y,
@@ -333,6 +358,7 @@ fn main() -> ! {
     // the App is built in its final place (blank estimator, every field a constant) and
     // the estimator designed into it: no estimator- or App-sized temporary on the stack
     let mut app = App::unconfigured(chips);
+    app.set_half_steps(true);
     if app
         .configure(
             &cfg,
@@ -379,6 +405,11 @@ fn main() -> ! {
         let c0 = DWT::cycle_count();
         let r = app.tick(&mut io);
         let dt = DWT::cycle_count().wrapping_sub(c0);
+        // the second step: the words are buffered, IO_UPDATE half a period after DRDY
+        if core::mem::take(&mut io.armed) {
+            while DWT::cycle_count().wrapping_sub(c0) < HALF_PERIOD_CYCLES {}
+            io.pulse();
+        }
         cycles_sum = cycles_sum.saturating_add(dt);
         cycles_max = cycles_max.max(dt);
         #[cfg(feature = "capture")]

@@ -6,7 +6,7 @@ use embedded_hal::spi::{Operation, SpiDevice};
 use paragyro_firmware::drivers::ad9959::DEFAULT_SYSCLK_HZ;
 use paragyro_firmware::drivers::ads131m08::{CHANNELS, FRAME_BYTES, Frame, RawCode};
 use paragyro_firmware::drivers::adxl355::{Range, STANDARD_GRAVITY_MPS2};
-use paragyro_firmware::fil::{ACCEL_BURST, FromFw};
+use paragyro_firmware::fil::{ACCEL_BURST, DdsEntry, FromFw};
 use paragyro_firmware::replay::{DdsCapture, Span, accel_bytes, encode_accel, encode_lockin};
 use paragyro_firmware::run::calibration;
 
@@ -138,24 +138,40 @@ impl Dds {
     }
 
     /// Applies one exchange's log in order: writes to the I/O buffers, IO_UPDATE pulses
-    /// to the active registers. Returns the number of pulses.
-    pub fn apply(&mut self, m: &FromFw) -> anyhow::Result<u32> {
+    /// to the active registers. Returns the number of pulses and, if the log armed a
+    /// pulse for half a period after DRDY, the pump (Hz, `(ASF/1023)²`) the DDS ran
+    /// before it (the first half of the interval; [`Dds::pump_hz`] is then the second's).
+    pub fn apply(&mut self, m: &FromFw) -> anyhow::Result<(u32, Option<(f64, f64)>)> {
         let mut pulses = 0;
+        let mut first_half = None;
         for e in m.dds_entries() {
             match e {
-                Some(bytes) => {
+                DdsEntry::Write(bytes) => {
                     let mut spi = self.cap.spi();
                     spi.transaction(&mut [Operation::Write(bytes)])
                         .map_err(|e| anyhow::anyhow!("AD9959 model: {e:?}"))?;
                     self.writes += 1;
                 }
-                None => {
+                DdsEntry::Pulse => {
+                    anyhow::ensure!(
+                        first_half.is_none(),
+                        "AD9959 model: a pulse now after the half-period pulse"
+                    );
+                    self.cap.pulse();
+                    pulses += 1;
+                }
+                DdsEntry::HalfPeriodPulse => {
+                    anyhow::ensure!(
+                        first_half.is_none(),
+                        "AD9959 model: two half-period pulses in one tick"
+                    );
+                    first_half = Some((self.pump_hz(), self.pump_word_scale()));
                     self.cap.pulse();
                     pulses += 1;
                 }
             }
         }
-        Ok(pulses)
+        Ok((pulses, first_half))
     }
 
     /// Pump frequency the DDS runs, Hz.
@@ -264,14 +280,47 @@ mod tests {
         m.dds_log[..log.len()].copy_from_slice(&log);
         m.dds_log_len = log.len() as u16;
         let mut dds = Dds::new();
-        assert_eq!(dds.apply(&m).unwrap(), 0);
+        assert_eq!(dds.apply(&m).unwrap(), (0, None));
         assert_eq!(dds.pump_hz(), 0.0, "buffered, not active before IO_UPDATE");
         m.dds_log[log.len()] = 0;
         m.dds_log_len += 1;
         assert!(usize::from(m.dds_log_len) <= DDS_LOG_BYTES);
         let mut dds = Dds::new();
-        assert_eq!(dds.apply(&m).unwrap(), 1);
+        assert_eq!(dds.apply(&m).unwrap(), (1, None));
         assert_eq!(dds.pump_hz(), plan.pump_hz());
+        assert!(dds.phase_locked());
+    }
+
+    #[test]
+    fn a_half_period_pulse_splits_the_interval() {
+        let words = |hz: f64| {
+            let plan = PumpPlan::new(hz, DEFAULT_SYSCLK_HZ).unwrap();
+            let mut log = Vec::new();
+            for (ch, ftw) in [
+                (Channel::PUMP, plan.pump_ftw()),
+                (Channel::REFERENCE, plan.reference_ftw()),
+                (Channel::THIRD, plan.third_ftw()),
+            ] {
+                log.extend_from_slice(&[2, 0x00, ch.csr_enable() | 0x02]);
+                log.push(5);
+                log.push(0x04);
+                log.extend_from_slice(&ftw.to_be_bytes());
+            }
+            (plan, log)
+        };
+        let (a, mut log) = words(21_900.0);
+        log.push(0);
+        let (b, log_b) = words(21_901.0);
+        log.extend_from_slice(&log_b);
+        log.push(paragyro_firmware::fil::HALF_PERIOD_PULSE);
+        let mut m = FromFw::EMPTY;
+        m.dds_log[..log.len()].copy_from_slice(&log);
+        m.dds_log_len = log.len() as u16;
+        let mut dds = Dds::new();
+        let (pulses, first) = dds.apply(&m).unwrap();
+        assert_eq!(pulses, 2);
+        assert_eq!(first.map(|f| f.0), Some(a.pump_hz()), "first half");
+        assert_eq!(dds.pump_hz(), b.pump_hz(), "second half");
         assert!(dds.phase_locked());
     }
 }

@@ -24,8 +24,8 @@ pub mod verdict;
 
 use std::path::{Path, PathBuf};
 
-use paragyro_core::config::PumpProfile;
 use paragyro_simulator::scenario::{EventKind, EventSpec, PlantParam, Scenario};
+pub use session::BoardPump;
 
 pub use chips::Faults;
 pub use verdict::{Expect, Summary};
@@ -168,34 +168,26 @@ pub fn run(
     plugin: &Path,
     out: &Path,
     seed: Option<u64>,
-    profile: PumpProfile,
+    pump: BoardPump,
 ) -> anyhow::Result<Summary> {
     let seed = seed.unwrap_or(ls.scenario.seed);
     let opts = session::Options {
         scenario: ls.scenario.clone(),
         seed: Some(seed),
         faults: ls.faults,
-        core_profile: profile,
+        pump,
         elf: elf.to_path_buf(),
         plugin: plugin.to_path_buf(),
         work_dir: out.to_path_buf(),
     };
     let (fil, host) = std::thread::scope(|s| {
-        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, profile));
+        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, pump));
         let fil = session::run(&opts);
         (fil, host.join())
     });
     let fil = fil?;
     let host = host.map_err(|_| anyhow::anyhow!("the host-only loop's thread panicked"))??;
-    let summary = verdict::summarize(
-        &ls.scenario,
-        seed,
-        profile,
-        &fil,
-        host,
-        ls.expect,
-        &ls.faults,
-    );
+    let summary = verdict::summarize(&ls.scenario, seed, pump, &fil, host, ls.expect, &ls.faults);
     std::fs::create_dir_all(out)?;
     std::fs::write(
         out.join("summary.json"),

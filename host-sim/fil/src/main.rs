@@ -5,14 +5,17 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, ValueEnum};
-use paragyro_core::config::PumpProfile;
+use paragyro_fil::BoardPump;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
-enum Profile {
-    /// The DDS steps at IO_UPDATE (what the board's AD9959 does): ZOH replica.
+enum Pump {
+    /// Two DDS steps per sample (IO_UPDATE at the tick and half a period after DRDY),
+    /// the core's linear replica: the boards' configuration.
+    HalfSteps,
+    /// One DDS step per sample at the tick, the core's ZOH replica (`Staircase`).
     Staircase,
-    /// The core assumes a linear sweep between samples (FOH replica).
-    Linear,
+    /// One DDS step per sample, the core told `Linear` (a mismatch, for measurement).
+    StaircaseLinear,
 }
 
 /// Firmware in the loop: QEMU runs the firmware, this process plays the chips.
@@ -28,9 +31,9 @@ struct Cli {
     /// Plant noise seed (default: the scenario's).
     #[arg(long)]
     seed: Option<u64>,
-    /// Pump profile the core is configured with.
-    #[arg(long, value_enum, default_value = "staircase")]
-    core_profile: Profile,
+    /// How the board's DDS moves the pump between commands (and the core's replica).
+    #[arg(long, value_enum, default_value = "half-steps")]
+    pump: Pump,
     /// Use this `fil` image instead of building one.
     #[arg(long)]
     elf: Option<PathBuf>,
@@ -111,9 +114,10 @@ fn run() -> anyhow::Result<bool> {
         }
     };
     let plugin = paragyro_fil::build::plugin(&out)?;
-    let profile = match cli.core_profile {
-        Profile::Staircase => PumpProfile::Staircase,
-        Profile::Linear => PumpProfile::Linear,
+    let profile = match cli.pump {
+        Pump::HalfSteps => BoardPump::HalfSteps,
+        Pump::Staircase => BoardPump::Staircase,
+        Pump::StaircaseLinear => BoardPump::StaircaseLinear,
     };
     eprintln!("paragyro-fil: running `{}` in the loop", ls.name);
     let s = paragyro_fil::run(&ls, &elf, &plugin, &out, cli.seed, profile)?;

@@ -13,14 +13,14 @@ use anyhow::{Context, bail, ensure};
 use paragyro_core::config::PumpProfile;
 use paragyro_firmware::drivers::adxl355::Range;
 use paragyro_firmware::fil::{
-    FROM_FW_BYTES, FromFw, Init, MAX_TICK_CONTROLS, TICK_END, TICK_SETUP, ToFw, flag,
+    FROM_FW_BYTES, FromFw, Init, MAX_TICK_CONTROLS, TICK_END, TICK_SETUP, ToFw, flag, init_flag,
 };
 use paragyro_firmware::run::{AMPLITUDE, GUARD_HALF_WIDTH_HZ};
 use paragyro_firmware::table::{config_slots, control};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use paragyro_simulator::runner;
-use paragyro_simulator::scenario::{EventKind, L0_M, Scenario};
+use paragyro_simulator::scenario::{EventKind, L0_M, PumpProfileSpec, Scenario};
 
 use crate::chips::{Dds, Faults, SensorChips};
 
@@ -43,15 +43,62 @@ pub struct Options {
     pub seed: Option<u64>,
     /// Faults to inject.
     pub faults: Faults,
-    /// The pump profile the core is configured with (what the board's DDS does: it steps
-    /// at IO_UPDATE, `Staircase`).
-    pub core_profile: PumpProfile,
+    /// How the board's DDS moves between commands and what the core is told.
+    pub pump: BoardPump,
     /// The firmware image (a `fil` build).
     pub elf: PathBuf,
     /// The instruction-count plugin (`libtickcount.so`).
     pub plugin: PathBuf,
     /// Working directory of the session (pipes, logs).
     pub work_dir: PathBuf,
+}
+
+/// How the board's DDS moves between two 500 Hz commands, and the pump profile its core
+/// is configured with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BoardPump {
+    /// Two steps per sample, 1/4 and 3/4 of the way (IO_UPDATE at the tick and half a
+    /// period after DRDY, `App::set_half_steps`); the core's linear replica. The
+    /// stm32f405 and `fil` boards.
+    HalfSteps,
+    /// One step per sample, at the tick; the core told `Staircase` (ZOH replica).
+    Staircase,
+    /// One step per sample; the core told `Linear` (the mismatch, kept as a measurement).
+    StaircaseLinear,
+}
+
+impl BoardPump {
+    /// The core's pump profile.
+    pub fn core_profile(self) -> PumpProfile {
+        match self {
+            BoardPump::HalfSteps => PumpProfile::HalfSteps,
+            BoardPump::StaircaseLinear => PumpProfile::Linear,
+            BoardPump::Staircase => PumpProfile::Staircase,
+        }
+    }
+
+    /// Whether the board pulses IO_UPDATE a second time, half a period after DRDY.
+    pub fn half_steps(self) -> bool {
+        self == BoardPump::HalfSteps
+    }
+
+    /// The host-only loop's pump (the DDS's shape, unquantised).
+    pub fn sim_profile(self) -> PumpProfileSpec {
+        if self.half_steps() {
+            PumpProfileSpec::HalfSteps
+        } else {
+            PumpProfileSpec::Staircase
+        }
+    }
+
+    /// Its name on the command line and in the summary.
+    pub fn name(self) -> &'static str {
+        match self {
+            BoardPump::HalfSteps => "half-steps",
+            BoardPump::Staircase => "staircase",
+            BoardPump::StaircaseLinear => "staircase-linear",
+        }
+    }
 }
 
 /// One tick as the host saw it.
@@ -83,6 +130,8 @@ pub struct Session {
     pub instructions: Vec<u64>,
     /// IO_UPDATE pulses the AD9959 model saw.
     pub pulses: u64,
+    /// Of those, pulses half a period after DRDY (the second of two steps).
+    pub half_period_pulses: u64,
     /// Register writes the AD9959 model applied.
     pub dds_writes: u64,
     /// Ticks after which the DDS's three channels were not phase-locked (2k, k, 3k).
@@ -322,7 +371,7 @@ pub fn core_config(sc: &Scenario, profile: PumpProfile) -> paragyro_core::Config
 /// Runs the session.
 pub fn run(opts: &Options) -> anyhow::Result<Session> {
     let sc = &opts.scenario;
-    let cfg = core_config(sc, opts.core_profile);
+    let cfg = core_config(sc, opts.pump.core_profile());
     cfg.validated()
         .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
     let elf = fs::read(&opts.elf).with_context(|| format!("reading {}", opts.elf.display()))?;
@@ -332,6 +381,11 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         cfg_slots: config_slots(&cfg),
         um_per_volt: UM_PER_VOLT,
         accel_range_bits: ACCEL_RANGE_BITS,
+        flags: if opts.pump.half_steps() {
+            init_flag::HALF_STEPS
+        } else {
+            0
+        },
         guard_half_width_hz: GUARD_HALF_WIDTH_HZ,
         amplitude: [AMPLITUDE.base_scale, AMPLITUDE.full_scale],
     };
@@ -344,7 +398,8 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         setup.tick
     );
     let mut dds = Dds::new();
-    let mut pulses = u64::from(dds.apply(&setup)?);
+    let mut pulses = u64::from(dds.apply(&setup)?.0);
+    let mut half_pulses = 0u64;
     ensure!(
         pulses > 0,
         "the firmware did not start the pump (no IO_UPDATE at set-up)"
@@ -354,9 +409,11 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
     let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
     let fs = cfg.fs_hz;
+    // two steps per sample: the plant advances in half intervals, each with its pump
+    let halves = if opts.pump.half_steps() { 2 } else { 1 };
     let simcfg = SimConfig {
         omega0_rad_s: w0,
-        fs_hz: fs,
+        fs_hz: fs * f64::from(halves),
         steps_per_period: sc.sim.steps_per_period,
         omega_max: (cfg.pump_centre_hz + GUARD_HALF_WIDTH_HZ) / (2.0 * f0) * 1.01,
         lpf_order: sc.sim.lockin_lpf_order,
@@ -404,7 +461,9 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
             "answer for tick {} at tick {k}",
             fw.tick
         );
-        pulses += u64::from(dds.apply(&fw)?);
+        let (p, first_half) = dds.apply(&fw)?;
+        pulses += u64::from(p);
+        half_pulses += u64::from(first_half.is_some());
         if !dds.phase_locked() {
             unlocked += 1;
         }
@@ -421,26 +480,45 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
             break;
         }
         // the DDS steps at IO_UPDATE and holds: the plant sees the new word over the
-        // whole interval (a staircase; the pulse's delay after DRDY is not modelled)
+        // whole interval (a staircase), or with two steps the first word over the first
+        // half and the second over the second (the first pulse's delay after DRDY, the
+        // tick's length, is not modelled)
         let pa1 = sc.plant_at(t_next);
         let theta = Theta {
             drive: pa.theta_drive,
             sense: pa.theta_sense,
         };
-        let omega = dds.pump_hz() / (2.0 * f0);
-        let s = dds.pump_word_scale() * f64::from(AMPLITUDE.full_scale) * sc.pump_scale_at(t_next);
-        let u0 = PlantInputs {
-            omega,
-            s,
-            ax: pa.accel_x,
-            ay: pa.accel_y,
+        let full = f64::from(AMPLITUDE.full_scale) * sc.pump_scale_at(t_next);
+        let second = (dds.pump_hz(), dds.pump_word_scale());
+        let input = |(hz, word_scale): (f64, f64), ax: f64, ay: f64| PlantInputs {
+            omega: hz / (2.0 * f0),
+            s: word_scale * full,
+            ax,
+            ay,
         };
-        let u1 = PlantInputs {
-            ax: pa1.accel_x,
-            ay: pa1.accel_y,
-            ..u0
-        };
-        sim.advance(&theta, &u0, &u1);
+        if opts.pump.half_steps() {
+            let first = first_half.unwrap_or(second);
+            let (axm, aym) = (
+                0.5 * (pa.accel_x + pa1.accel_x),
+                0.5 * (pa.accel_y + pa1.accel_y),
+            );
+            sim.advance(
+                &theta,
+                &input(first, pa.accel_x, pa.accel_y),
+                &input(first, axm, aym),
+            );
+            sim.advance(
+                &theta,
+                &input(second, axm, aym),
+                &input(second, pa1.accel_x, pa1.accel_y),
+            );
+        } else {
+            sim.advance(
+                &theta,
+                &input(second, pa.accel_x, pa.accel_y),
+                &input(second, pa1.accel_x, pa1.accel_y),
+            );
+        }
     }
     let end_msg = ToFw {
         tick: u32::MAX,
@@ -476,6 +554,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         end,
         instructions,
         pulses,
+        half_period_pulses: half_pulses,
         dds_writes: dds.writes,
         unlocked_ticks: unlocked,
         exit_code,

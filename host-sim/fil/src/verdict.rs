@@ -2,14 +2,13 @@
 //! the same scenario it is compared with.
 
 use paragyro_core::Estimator;
-use paragyro_core::config::PumpProfile;
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::runner;
-use paragyro_simulator::scenario::{EventKind, PlantParam, PumpProfileSpec, Scenario};
+use paragyro_simulator::scenario::{EventKind, PlantParam, Scenario};
 use serde::{Deserialize, Serialize};
 
 use crate::chips::Faults;
-use crate::session::Session;
+use crate::session::{BoardPump, Session};
 
 /// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
 /// (the replay's rule, `paragyro_firmware::run::WY2_TOL_OF_DRIFT`).
@@ -50,6 +49,10 @@ pub struct LoopNumbers {
     pub pump_end_hz: f64,
     /// Rate estimate at the end, °/s.
     pub rate_dps_est: f64,
+    /// Mean rate estimate over the last 1 s, °/s (its scale factor against a constant
+    /// true rate: the sample's own noise averaged out).
+    #[serde(default)]
+    pub rate_dps_mean_last_s: f64,
     /// Health bits at the end.
     pub health_end: u32,
 }
@@ -90,6 +93,10 @@ pub struct Summary {
     pub seed: u64,
     /// The pump profile the core was configured with.
     pub core_pump_profile: String,
+    /// How the board's DDS moved the pump (`half-steps`, `staircase`,
+    /// `staircase-linear`: `session::BoardPump`).
+    #[serde(default)]
+    pub board_pump: String,
     /// ω̂y² within its tolerance of the truth at the end.
     pub converged: bool,
     /// Retunes the firmware's core completed.
@@ -122,6 +129,9 @@ pub struct Summary {
     pub pump_end_hz: f64,
     /// IO_UPDATE pulses the AD9959 model saw (set-up included).
     pub io_update_pulses: u64,
+    /// Of those, pulses half a period after DRDY (two steps per sample).
+    #[serde(default)]
+    pub half_period_pulses: u64,
     /// Register writes the AD9959 model applied.
     pub dds_writes: u64,
     /// Ticks after which the DDS's channels were not phase-locked (pump 2k, refs k, 3k).
@@ -134,6 +144,9 @@ pub struct Summary {
     pub adc_fault_ticks: u32,
     /// Rate estimate at the end, °/s.
     pub rate_dps_est: f64,
+    /// Mean rate estimate over the last 1 s, °/s.
+    #[serde(default)]
+    pub rate_dps_mean_last_s: f64,
     /// True rate at the end, °/s.
     pub rate_dps_true: f64,
     /// The core's health bits after the last tick.
@@ -196,11 +209,12 @@ pub fn wy2_tolerance(sc: &Scenario) -> f64 {
 }
 
 /// The host-only closed loop: the same scenario and core configuration (f32), the plant's
-/// pump a staircase (what the DDS does), no quantisation, no SPI.
-pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Result<LoopNumbers> {
+/// pump shaped as the board's DDS moves it (two steps or one per sample), no
+/// quantisation, no SPI.
+pub fn host_only(sc: &Scenario, seed: u64, pump: BoardPump) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
-    sc.sim.pump_profile = PumpProfileSpec::Staircase;
-    let cfg = crate::session::core_config(&sc, profile);
+    sc.sim.pump_profile = pump.sim_profile();
+    let cfg = crate::session::core_config(&sc, pump.core_profile());
     let mut est: Estimator<f32> = cfg
         .build()
         .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
@@ -210,6 +224,7 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
     let mut last_pump = f64::NAN;
     let mut health_end = 0;
     let mut wy2_true = f64::NAN;
+    let mut rates = Vec::new();
     runner::closed_loop(
         &sc,
         seed,
@@ -224,6 +239,7 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
             last_pump = ls.out.pump_hz_next;
             health_end = ls.out.health.bits();
             wy2_true = ls.plant.phys[4];
+            rates.push((ls.t_s, ls.out.rate.rate_dps));
         },
     )?;
     let wy2_est = est.wy2();
@@ -236,8 +252,18 @@ pub fn host_only(sc: &Scenario, seed: u64, profile: PumpProfile) -> anyhow::Resu
         bad_ticks: bad,
         pump_end_hz: last_pump,
         rate_dps_est: est.rate_output().rate_dps,
+        rate_dps_mean_last_s: mean_last_s(&sc, rates.into_iter()),
         health_end,
     })
+}
+
+/// The mean of `(t, v)` over the scenario's last second.
+fn mean_last_s(sc: &Scenario, rows: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let from = sc.duration_s - 1.0;
+    let (n, sum) = rows
+        .filter(|(t, _)| *t >= from)
+        .fold((0u32, 0.0), |(n, s), (_, v)| (n + 1, s + v));
+    sum / f64::from(n)
 }
 
 /// What the scenario expects of the loop.
@@ -270,7 +296,7 @@ pub const PUMP_FIL_VS_HOST_HZ: f64 = 0.94;
 pub fn summarize(
     sc: &Scenario,
     seed: u64,
-    profile: PumpProfile,
+    pump: BoardPump,
     s: &Session,
     host: LoopNumbers,
     expect: Expect,
@@ -441,7 +467,8 @@ pub fn summarize(
     Summary {
         scenario: sc.name.clone(),
         seed,
-        core_pump_profile: format!("{profile:?}"),
+        core_pump_profile: format!("{:?}", pump.core_profile()),
+        board_pump: pump.name().to_string(),
         converged,
         retunes: c[9],
         sense_amp_ratio: ratio,
@@ -458,6 +485,7 @@ pub fn summarize(
         wy2_tol,
         pump_end_hz: s.rows.last().map_or(f64::NAN, |r| r.dds_pump_hz),
         io_update_pulses: s.pulses,
+        half_period_pulses: s.half_period_pulses,
         dds_writes: s.dds_writes,
         dds_unlocked_ticks: s.unlocked_ticks,
         fw_counters: FwCounts {
@@ -476,6 +504,7 @@ pub fn summarize(
         dds_fault_ticks,
         adc_fault_ticks,
         rate_dps_est: rate_est,
+        rate_dps_mean_last_s: mean_last_s(sc, s.rows.iter().map(|r| (r.t_s, r.fw.rate_dps))),
         rate_dps_true: rate_true,
         health_end: s.rows.last().map_or(0, |r| r.fw.health),
         exit_code: s.exit_code,

@@ -44,8 +44,8 @@ pub fn core_config(sc: &Scenario) -> Config {
     c.pump_profile = match sc.sim.pump_profile {
         PumpProfileSpec::Linear => paragyro_core::config::PumpProfile::Linear,
         PumpProfileSpec::Staircase => paragyro_core::config::PumpProfile::Staircase,
-        // the two steps follow the sweep to within a quarter of a step: the FOH replica
-        PumpProfileSpec::HalfSteps => paragyro_core::config::PumpProfile::Linear,
+        // the two frequency steps follow the sweep, the scale holds: FOH and ZOH replicas
+        PumpProfileSpec::HalfSteps => paragyro_core::config::PumpProfile::HalfSteps,
     };
     // rows are weighted to unit noise; a noise-free run keeps the 1 pm/√Hz weighting
     c.noise_pm_rthz = if sc.sim.noise_pm_rthz > 0.0 {
@@ -442,9 +442,10 @@ pub fn closed_loop_hooked<T: Real>(
 }
 
 /// One sample interval of a simulator built at twice the sample rate
-/// ([`PumpProfileSpec::HalfSteps`]): the pump (frequency and scale) holds the value 1/4 of
-/// the way from `u0` to `u1` over the first half and 3/4 over the second, the
-/// accelerations move linearly as in [`GyroSim::advance`].
+/// ([`PumpProfileSpec::HalfSteps`]): the pump frequency holds the value 1/4 of the way
+/// from `u0` to `u1` over the first half and 3/4 over the second, the pump scale holds
+/// `u1`'s over both (one step), the accelerations move linearly as in
+/// [`GyroSim::advance`].
 pub fn advance_half_steps(sim: &mut GyroSim, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
     let at = |f: f64| PlantInputs {
         omega: u0.omega + (u1.omega - u0.omega) * f,
@@ -454,16 +455,16 @@ pub fn advance_half_steps(sim: &mut GyroSim, theta: &Theta, u0: &PlantInputs, u1
     };
     let (mid, end) = (at(0.5), at(1.0));
     let step = |f: f64, a: &PlantInputs, b: &PlantInputs| {
-        let held = at(f);
+        let omega = at(f).omega;
         (
             PlantInputs {
-                omega: held.omega,
-                s: held.s,
+                omega,
+                s: u1.s,
                 ..*a
             },
             PlantInputs {
-                omega: held.omega,
-                s: held.s,
+                omega,
+                s: u1.s,
                 ..*b
             },
         )

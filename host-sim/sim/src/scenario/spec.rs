@@ -230,8 +230,9 @@ pub struct SimSpec {
     /// How the pump generator moves between two 500 Hz commands: `"linear"` (a DDS
     /// linear sweep), `"staircase"` (the new frequency and amplitude hold over the
     /// whole interval, as a DDS updated once per sample at the sample instant) or
-    /// `"half-steps"` (two steps per interval, 1/4 and 3/4 of the way: the stm32f405
-    /// and `fil` boards' DDS, its IO_UPDATE pulsed at the sample and half a period later).
+    /// `"half-steps"` (two frequency steps per interval, 1/4 and 3/4 of the way, the scale
+    /// one step: the stm32f405 and `fil` boards' DDS, its IO_UPDATE pulsed at the sample
+    /// and half a period later).
     pub pump_profile: PumpProfileSpec,
 }
 
@@ -244,12 +245,13 @@ pub enum PumpProfileSpec {
     Linear,
     /// Each command holds over the whole interval that ends at its sample.
     Staircase,
-    /// Two steps per interval: from the interval's start the value 1/4 of the way from
-    /// the previous command to the new one, from its middle the value 3/4 of the way (a
-    /// DDS written at the sample instant and pulsed then and half a period later). Each
-    /// step holds the linear sweep's mean over its half, so the pump's phase at the
-    /// samples is the sweep's; the core keeps its `Linear` (FOH) replica (README "Pump
-    /// profile", measured).
+    /// Two frequency steps per interval: from the interval's start the value 1/4 of the
+    /// way from the previous command to the new one, from its middle the value 3/4 of the
+    /// way (a DDS written at the sample instant and pulsed then and half a period later);
+    /// each step holds the linear sweep's mean over its half, so the pump's phase at the
+    /// samples is the sweep's. The scale holds the new command over the interval (one
+    /// step). The core's `PumpProfile::HalfSteps`: FOH replica for the frequency, ZOH for
+    /// the scale (README "Pump profile", measured).
     #[serde(rename = "half-steps")]
     HalfSteps,
 }
