@@ -10,32 +10,31 @@
 
 use paragyro_core::Estimator;
 use paragyro_core::config::PumpProfile;
-use paragyro_simulator::runner::{closed_loop, core_config};
+use paragyro_simulator::runner::{LoopSample, closed_loop, core_config};
 use paragyro_simulator::scenario::{PumpProfileSpec, Scenario};
 
-/// Final relative errors of θ14 and of the rate (identify, 10 s, f32, seed 1).
-fn run(sim: PumpProfileSpec, core: PumpProfile) -> (f64, f64) {
+/// Runs `identify` (10 s, f32, seed 1) with the generator `sim` and the replica `core`,
+/// each closed-loop sample to `visit`.
+fn identify(sim: PumpProfileSpec, core: PumpProfile, visit: impl FnMut(&LoopSample<'_, f32>)) {
     let mut sc = Scenario::builtin("identify").unwrap();
     sc.sim.pump_profile = sim;
     let mut cfg = core_config(&sc);
     cfg.pump_profile = core;
     let mut est: Estimator<f32> = cfg.build().unwrap();
+    closed_loop(&sc, sc.seed, &mut est, |_| {}, visit).unwrap();
+}
+
+/// Final relative errors of θ14 and of the rate (identify, 10 s, f32, seed 1).
+fn run(sim: PumpProfileSpec, core: PumpProfile) -> (f64, f64) {
     let mut last = (f64::NAN, f64::NAN);
-    closed_loop(
-        &sc,
-        sc.seed,
-        &mut est,
-        |_| {},
-        |ls| {
-            let (t1, t2) = ls.est.theta();
-            let g = (t1[3] - t2[3]) / 4.0;
-            last = (
-                ((t1[3] - ls.plant.theta_drive[3]) / ls.plant.theta_drive[3]).abs(),
-                ((g - 3.8581e-5) / 3.8581e-5).abs(),
-            );
-        },
-    )
-    .unwrap();
+    identify(sim, core, |ls| {
+        let (t1, t2) = ls.est.theta();
+        let g = (t1[3] - t2[3]) / 4.0;
+        last = (
+            ((t1[3] - ls.plant.theta_drive[3]) / ls.plant.theta_drive[3]).abs(),
+            ((g - 3.8581e-5) / 3.8581e-5).abs(),
+        );
+    });
     last
 }
 
@@ -66,27 +65,15 @@ fn a_stepping_pump_needs_the_matching_replica_and_still_costs_accuracy() {
 
 /// Mean relative errors over 5–10 s of `identify` (f32, seed 1): θ14 and the fast rate.
 fn mean_errors(sim: PumpProfileSpec, core: PumpProfile) -> (f64, f64) {
-    let mut sc = Scenario::builtin("identify").unwrap();
-    sc.sim.pump_profile = sim;
-    let mut cfg = core_config(&sc);
-    cfg.pump_profile = core;
-    let mut est: Estimator<f32> = cfg.build().unwrap();
     let (mut n, mut e14, mut er) = (0.0, 0.0, 0.0);
-    closed_loop(
-        &sc,
-        sc.seed,
-        &mut est,
-        |_| {},
-        |ls| {
-            if ls.t_s >= 5.0 {
-                let t14 = ls.est.theta().0[3];
-                e14 += t14 / ls.plant.theta_drive[3] - 1.0;
-                er += ls.out.rate.rate_dps / ls.plant.rate_dps - 1.0;
-                n += 1.0;
-            }
-        },
-    )
-    .unwrap();
+    identify(sim, core, |ls| {
+        if ls.t_s >= 5.0 {
+            let t14 = ls.est.theta().0[3];
+            e14 += t14 / ls.plant.theta_drive[3] - 1.0;
+            er += ls.out.rate.rate_dps / ls.plant.rate_dps - 1.0;
+            n += 1.0;
+        }
+    });
     (e14 / n, er / n)
 }
 

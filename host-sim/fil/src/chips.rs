@@ -262,9 +262,9 @@ mod tests {
         assert_ne!(chips.accel_burst(4, 5.0, 5.0), held);
     }
 
-    #[test]
-    fn the_dds_model_applies_words_at_io_update_only() {
-        let plan = PumpPlan::new(21_900.0, DEFAULT_SYSCLK_HZ).unwrap();
+    /// A plan for `hz` and the DDS log that writes its three words (CSR, CFTW0 each).
+    fn plan_log(hz: f64) -> (PumpPlan, Vec<u8>) {
+        let plan = PumpPlan::new(hz, DEFAULT_SYSCLK_HZ).unwrap();
         let mut log = Vec::new();
         for (ch, ftw) in [
             (Channel::PUMP, plan.pump_ftw()),
@@ -276,6 +276,12 @@ mod tests {
             log.push(0x04);
             log.extend_from_slice(&ftw.to_be_bytes());
         }
+        (plan, log)
+    }
+
+    #[test]
+    fn the_dds_model_applies_words_at_io_update_only() {
+        let (plan, log) = plan_log(21_900.0);
         let mut m = FromFw::EMPTY;
         m.dds_log[..log.len()].copy_from_slice(&log);
         m.dds_log_len = log.len() as u16;
@@ -293,24 +299,9 @@ mod tests {
 
     #[test]
     fn a_half_period_pulse_splits_the_interval() {
-        let words = |hz: f64| {
-            let plan = PumpPlan::new(hz, DEFAULT_SYSCLK_HZ).unwrap();
-            let mut log = Vec::new();
-            for (ch, ftw) in [
-                (Channel::PUMP, plan.pump_ftw()),
-                (Channel::REFERENCE, plan.reference_ftw()),
-                (Channel::THIRD, plan.third_ftw()),
-            ] {
-                log.extend_from_slice(&[2, 0x00, ch.csr_enable() | 0x02]);
-                log.push(5);
-                log.push(0x04);
-                log.extend_from_slice(&ftw.to_be_bytes());
-            }
-            (plan, log)
-        };
-        let (a, mut log) = words(21_900.0);
+        let (a, mut log) = plan_log(21_900.0);
         log.push(0);
-        let (b, log_b) = words(21_901.0);
+        let (b, log_b) = plan_log(21_901.0);
         log.extend_from_slice(&log_b);
         log.push(paragyro_firmware::fil::HALF_PERIOD_PULSE);
         let mut m = FromFw::EMPTY;
