@@ -85,6 +85,9 @@ use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, Pu
 use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
 use crate::drivers::adxl355::Adxl355;
 
+mod pump;
+pub use pump::{PumpAmplitude, PumpGuard};
+
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
 ///
 /// Implemented for closures (`&mut || pin.set_high()…`) and for [`PinIoUpdate`]; the
@@ -133,149 +136,6 @@ pub struct Chips<AX, AY, XL, DDS> {
     pub accel: Adxl355<XL>,
     /// Pump (channel 0) and phase-locked lock-in references (channels 1, 2).
     pub dds: Ad9959<DDS>,
-}
-
-/// The last line of defence on the pump frequency: every command is clamped to
-/// `[min_hz, max_hz]` (the drive's parametric band with margin).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PumpGuard {
-    /// Lowest pump frequency ever commanded, Hz.
-    pub min_hz: f64,
-    /// Highest pump frequency ever commanded, Hz.
-    pub max_hz: f64,
-}
-
-impl PumpGuard {
-    /// The window `[min_hz, max_hz]` (validated by [`App::new`]).
-    pub const fn new(min_hz: f64, max_hz: f64) -> Self {
-        Self { min_hz, max_hz }
-    }
-
-    /// `centre_hz ± half_width_hz`.
-    pub fn around(centre_hz: f64, half_width_hz: f64) -> Self {
-        Self {
-            min_hz: centre_hz - half_width_hz,
-            max_hz: centre_hz + half_width_hz,
-        }
-    }
-
-    /// `min_hz ≤ hz ≤ max_hz` (false for NaN).
-    pub fn contains(&self, hz: f64) -> bool {
-        hz >= self.min_hz && hz <= self.max_hz
-    }
-
-    /// `hz` clamped to the window (never panics; NaN gives `min_hz`).
-    pub fn clamp(&self, hz: f64) -> f64 {
-        hz.max(self.min_hz).min(self.max_hz)
-    }
-
-    /// The middle of the window.
-    pub fn midpoint(&self) -> f64 {
-        0.5 * (self.min_hz + self.max_hz)
-    }
-
-    /// The DDS plan for `hz` clamped to the window, with a realised pump inside the
-    /// window: if rounding to the word grid would leave it, the next word inwards. `None`
-    /// if no pump word fits (window narrower than a step) or the DDS cannot make it.
-    ///
-    /// The word is `k = round(f/2 · 2^32 / f_SYSCLK)` as [`PumpPlan::new`] rounds it (the
-    /// same quotient, rounded once: `f / (2·f_SYSCLK/2^32)`), stepped in whole words, so
-    /// the image needs neither `PumpPlan::new` nor a second rounding (flash budget).
-    pub fn plan(&self, hz: f64, sysclk_hz: f64) -> Option<PumpPlan> {
-        // 0 < f_SYSCLK ≤ 500 MHz, finite: positive doubles order like their bits (−0,
-        // negatives, ∞ and NaN fall outside), no soft-float comparisons
-        if !(1..=ad9959::MAX_SYSCLK_HZ.to_bits()).contains(&sysclk_hz.to_bits()) {
-            return None;
-        }
-        // one pump step: the pump word 2k moves by 2
-        let step = 2.0 * sysclk_hz / FTW_SCALE;
-        // saturating: NaN and negatives give 0 (no plan), huge values u32::MAX (none)
-        let k = (self.clamp(hz) / step + 0.5) as u32;
-        let plan = PumpPlan::from_reference_ftw(k, sysclk_hz)?;
-        let realised = plan.pump_hz();
-        let plan = if realised > self.max_hz {
-            // k > 0 (a plan): no wrap
-            PumpPlan::from_reference_ftw(k.wrapping_sub(1), sysclk_hz)?
-        } else if realised < self.min_hz {
-            // 3k < 2^31 (a plan): no wrap
-            PumpPlan::from_reference_ftw(k.wrapping_add(1), sysclk_hz)?
-        } else {
-            plan
-        };
-        self.contains(plan.pump_hz()).then_some(plan)
-    }
-
-    fn validate(&self, sysclk_hz: f64, initial_hz: f64) -> Result<(), ConfigError> {
-        let err = |reason| ConfigError {
-            field: "guard",
-            reason,
-        };
-        if !(self.min_hz.is_finite() && self.max_hz.is_finite() && self.min_hz > 0.0) {
-            return Err(err("min_hz and max_hz must be finite and > 0"));
-        }
-        if self.min_hz >= self.max_hz {
-            return Err(err("min_hz must be below max_hz"));
-        }
-        if self.plan(self.min_hz, sysclk_hz).is_none()
-            || self.plan(self.max_hz, sysclk_hz).is_none()
-        {
-            return Err(err(
-                "the DDS cannot make a pump inside the window (too narrow, or 3Ω at Nyquist)",
-            ));
-        }
-        if !self.contains(initial_hz) {
-            return Err(err("the configured pump centre is outside the window"));
-        }
-        Ok(())
-    }
-}
-
-/// How the core's pump scale `s = (V/V_A0)²` maps to the DDS amplitude word.
-///
-/// The word commanded for the core's multiplier `m` (`StepOutput::pump_scale_next`) is
-/// `AmplitudeWord::from_scale(m · base_scale / full_scale)`, and the scale in effect that
-/// the next [`Sample`] carries is `word.scale() · full_scale`. The DDS clips at the full
-/// word: with `full_scale < base_scale · (1 + dither.scale_frac)` the top of the amplitude
-/// dither is clipped (the core is told the clipped value, so the estimate stays
-/// consistent; only the amplitude excitation shrinks).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PumpAmplitude {
-    /// Operating pump scale `s_base = (V_base/V_A0)²` (1: the configured `pump_amp_ref_v`).
-    pub base_scale: f32,
-    /// `s` of the full DDS word (ASF 1023) after the board's analog gain, `(V_full/V_A0)²`.
-    pub full_scale: f32,
-}
-
-impl PumpAmplitude {
-    /// `s_base = 1` and the full DDS word makes `V_A0`.
-    pub const UNITY: PumpAmplitude = PumpAmplitude {
-        base_scale: 1.0,
-        full_scale: 1.0,
-    };
-
-    /// The word for the core's scale multiplier `m`.
-    pub fn word_for(&self, multiplier: f64) -> AmplitudeWord {
-        AmplitudeWord::from_scale(multiplier as f32 * self.base_scale / self.full_scale)
-    }
-
-    /// The pump scale `s` a word realises.
-    pub fn realised(&self, word: AmplitudeWord) -> f32 {
-        word.scale() * self.full_scale
-    }
-
-    fn validate(&self) -> Result<(), ConfigError> {
-        let ok = |v: f32| v.is_finite() && v > 0.0;
-        if ok(self.base_scale) && ok(self.full_scale) {
-            Ok(())
-        } else {
-            Err(ConfigError {
-                field: "pump_amplitude",
-                reason: "base_scale and full_scale must be finite and > 0",
-            })
-        }
-    }
 }
 
 /// Firmware-side fault counters since start-up (saturating). The core keeps its own

@@ -75,6 +75,29 @@ struct HalfPeriodIo<P> {
     armed: bool,
 }
 
+impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
+    /// The second step: if the tick armed it (its words are buffered in the DDS), waits
+    /// until [`HALF_PERIOD_CYCLES`] after `c0` (the tick's start, just after DRDY) and
+    /// pulses IO_UPDATE.
+    fn finish_period(&mut self, c0: u32) {
+        if core::mem::take(&mut self.armed) {
+            while DWT::cycle_count().wrapping_sub(c0) < HALF_PERIOD_CYCLES {}
+            self.pin.pulse();
+        }
+    }
+}
+
+/// `Config::table2()` with the pump profile of this board's DDS: two frequency steps per
+/// sample, the amplitude one (`PumpProfile::HalfSteps`, with `App::set_half_steps`). The
+/// AD9959's linear-sweep mode cannot sweep as slowly as the core commands (app.rs); one
+/// step per sample with the ZOH replica reads the rate +1.2 % high on `identify` (README
+/// "Pump profile"; two steps: +0.009 %).
+fn board_config() -> Config {
+    let mut cfg = Config::table2();
+    cfg.pump_profile = paragyro_core::config::PumpProfile::HalfSteps;
+    cfg
+}
+
 impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
     fn pulse(&mut self) {
         self.pin.pulse();
@@ -328,10 +351,8 @@ fn main() -> ! {
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
-    let mut io = HalfPeriodIo {
-        pin: PinIoUpdate(gpiob.pb1.into_push_pull_output()),
-        armed: false,
-    };
+    let (pin, armed) = (PinIoUpdate(gpiob.pb1.into_push_pull_output()), false);
+    let mut io = HalfPeriodIo { pin, armed };
 
     let mut delay = CycleDelay;
     let adc_x = init_adc(adc_x_dev, &mut delay);
@@ -342,12 +363,7 @@ fn main() -> ! {
         io.pulse();
     }
 
-    // The AD9959 steps at IO_UPDATE (its linear-sweep mode cannot sweep as slowly as the
-    // core commands: app.rs). Two steps per sample, 1/4 and 3/4 of the way, follow the
-    // linear sweep the core's default replica assumes (README "Pump profile": rate −0.027 %
-    // on identify, against +1.2 % for one step with the ZOH replica).
-    let mut cfg = Config::table2();
-    cfg.pump_profile = paragyro_core::config::PumpProfile::HalfSteps;
+    let cfg = board_config();
     let chips = Chips {
         adc_x,
         adc_y,
@@ -405,11 +421,7 @@ fn main() -> ! {
         let c0 = DWT::cycle_count();
         let r = app.tick(&mut io);
         let dt = DWT::cycle_count().wrapping_sub(c0);
-        // the second step: the words are buffered, IO_UPDATE half a period after DRDY
-        if core::mem::take(&mut io.armed) {
-            while DWT::cycle_count().wrapping_sub(c0) < HALF_PERIOD_CYCLES {}
-            io.pulse();
-        }
+        io.finish_period(c0);
         cycles_sum = cycles_sum.saturating_add(dt);
         cycles_max = cycles_max.max(dt);
         #[cfg(feature = "capture")]
