@@ -6,7 +6,8 @@
 //! accelerations) and prints, per device, the verdict, the held-out
 //! residual over the record's noise, the estimated against the true noise energy ratio,
 //! each device parameter's (calibrated − true)/σ and the held-out energy per row over ν²;
-//! then the 1σ coverage and the mean energy per row over ν² (`NOISE_ROW_PROFILE`).
+//! then the 1σ coverage, the mean energy per row over ν² (`NOISE_ROW_PROFILE`) and its
+//! standard deviation across the devices (`NOISE_ROW_SCATTER`).
 
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::diagnose::{Options, diagnose};
@@ -111,15 +112,34 @@ fn main() -> anyhow::Result<()> {
         rows_all.push(per_row);
     }
     let nrow = rows_all.first().map_or(0, Vec::len);
-    let mean_rows: Vec<String> = (0..nrow)
+    let n = rows_all.len() as f64;
+    let mean: Vec<f64> = (0..nrow)
+        .map(|i| rows_all.iter().map(|v| v[i]).sum::<f64>() / n)
+        .collect();
+    // the sample standard deviation across the devices, per row: how far a row's held-out
+    // energy at the noise scatters from one record to the next (`NOISE_ROW_SCATTER`)
+    let sd: Vec<f64> = (0..nrow)
         .map(|i| {
-            let m = rows_all.iter().map(|v| v[i]).sum::<f64>() / rows_all.len() as f64;
-            format!("{m:.3}")
+            let ss = rows_all
+                .iter()
+                .map(|v| (v[i] - mean[i]).powi(2))
+                .sum::<f64>();
+            (ss / (n - 1.0).max(1.0)).sqrt()
         })
         .collect();
+    let fmt = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.3}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
     println!(
         "held-out energy per row / nu2, mean over the devices: {}",
-        mean_rows.join(" ")
+        fmt(&mean)
+    );
+    println!(
+        "held-out energy per row / nu2, standard deviation across the devices: {}",
+        fmt(&sd)
     );
     println!("z columns: {:?}", &names[..10]);
     for i in 0..10 {

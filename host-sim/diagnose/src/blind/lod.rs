@@ -312,6 +312,34 @@ mod tests {
         );
     }
 
+    /// A force leak at its stated limit (1e-5) on a toleranced development device (`lod 3
+    /// 303 DIR 7`, its record `force_leak-3-1`): the re-simulation with the leak fitted at
+    /// −1.04e-5 brings the record to 1.07 × its noise, but three rows (drive DC, drive 1st
+    /// quadrature, sense 1st quadrature) were left 0.41, 0.59 and 1.58 above their noise
+    /// levels, more than half their gaps, and the verdict was `unknown`. Each is below 3 ×
+    /// the row's own scatter at the noise (0.47, 1.00, 2.40: `NOISE_ROW_SCATTER` × ν²), so
+    /// with `ROW_SCATTER_SIGMAS` it is named.
+    #[test]
+    fn a_force_leak_at_its_limit_is_named() {
+        let sc = Scenario::load("characterise").unwrap();
+        let t = Target::Library(Effect::ForceLeak);
+        let ti = Target::all().iter().position(|&x| x == t).unwrap();
+        let size = grid(size_range(Effect::ForceLeak), 7)[3];
+        let d = draw_at(t, size, "fl".into(), &mut job_rng(303, ti, 3, 1));
+        let dir = std::env::temp_dir().join(format!("paragyro-lod-fl-{}", std::process::id()));
+        let path = dir.join("fl.csv");
+        d.write_record(&sc, &path).unwrap();
+        let rec = record::read_record(&path).unwrap();
+        let r = diagnose::diagnose(&rec, &Options::default()).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(
+            r.report.verdict.answer(),
+            crate::diagnose::Answer::Effect(Effect::ForceLeak),
+            "{:?}",
+            r.report.confirmation
+        );
+    }
+
     /// The grid spans the drawn range, ends included, log-spaced.
     #[test]
     fn grid_spans_the_range_log_spaced() {

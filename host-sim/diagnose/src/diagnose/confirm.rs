@@ -11,8 +11,10 @@
 //! noise, at most [`NONE_NOISE_MAX`] × it: `none`'s own level; 5 % of a gap near the
 //! noise is below what the noise estimate resolves), and no row holding a share of the gap
 //! left more than [`ROW_UNEXPLAINED_MAX`] unexplained, each row against its own noise
-//! level ([`super::NOISE_ROW_PROFILE`]). Only then is the effect the verdict; otherwise
-//! `unknown` stands.
+//! level ([`super::NOISE_ROW_PROFILE`]) and only where what is left above it also exceeds
+//! [`ROW_SCATTER_SIGMAS`] × the row's scatter at the noise ([`super::NOISE_ROW_SCATTER`]):
+//! a row at its noise moves by that much from one record to the next. Only then is the
+//! effect the verdict; otherwise `unknown` stands.
 
 use serde::{Deserialize, Serialize};
 
@@ -27,8 +29,9 @@ use super::resim;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Verdict};
 use super::{
-    NOISE_ROW_ENERGY, NOISE_ROW_PROFILE, NONE_NOISE_MAX, NR, Options, ROW_GAP_MIN, ROW_GAP_SHARE,
-    ROW_UNEXPLAINED_MAX, SHARE_MIN, T_SIG, Timing, UNEXPLAINED_MAX,
+    NOISE_ROW_ENERGY, NOISE_ROW_PROFILE, NOISE_ROW_SCATTER, NONE_NOISE_MAX, NR, Options,
+    ROW_GAP_MIN, ROW_GAP_SHARE, ROW_SCATTER_SIGMAS, ROW_UNEXPLAINED_MAX, SHARE_MIN, T_SIG, Timing,
+    UNEXPLAINED_MAX,
 };
 use paragyro_simulator::effects::Effect;
 
@@ -203,11 +206,15 @@ fn test_one(
     };
     let g0: Vec<f64> = (0..NR).map(|i| e_b[i] - noise_of(i)).collect();
     let tot: f64 = g0.iter().map(|v| v.max(0.0)).sum();
+    // a row left mostly unexplained, by more than its own scatter at the noise (a row at
+    // its noise moves by that much from one record to the next: not a gap left)
     let unexplained_rows: Vec<usize> = (0..NR)
         .filter(|&i| {
+            let left = e_c[i] - noise_of(i);
             g0[i] > ROW_GAP_SHARE * tot
                 && g0[i] > ROW_GAP_MIN
-                && e_c[i] - noise_of(i) > ROW_UNEXPLAINED_MAX * g0[i]
+                && left > ROW_UNEXPLAINED_MAX * g0[i]
+                && left > ROW_SCATTER_SIGMAS * NOISE_ROW_SCATTER[i] * nu2_e
         })
         .collect();
     let residual_over_noise = e_c.iter().sum::<f64>() / NR as f64 / noise;

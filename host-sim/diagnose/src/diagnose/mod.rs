@@ -138,6 +138,20 @@ pub const ROW_GAP_SHARE: f64 = 0.02;
 pub const ROW_GAP_MIN: f64 = 0.05;
 /// … must not be left more than this fraction unexplained by the verdict.
 pub const ROW_UNEXPLAINED_MAX: f64 = 0.5;
+/// How far a row's held-out energy at the noise scatters from one record to the next
+/// (`ROW_LABELS` order, × the record's ν²): the standard deviation across clean toleranced
+/// development devices of the held-out energy per row over ν² after the baseline fit
+/// (`cargo run --release -p paragyro-diagnose --example clean -- 300 48`, its line
+/// "standard deviation across the devices"; the means on the line above it give
+/// [`NOISE_ROW_PROFILE`]). The sense 1st-harmonic rows scatter most (0.30, 0.37).
+pub const NOISE_ROW_SCATTER: [f64; NR] = [
+    0.073, 0.204, 0.154, 0.088, 0.116, 0.077, 0.303, 0.370, 0.096, 0.115,
+];
+/// The confirmation by re-simulation ([`confirm`]) counts a row as left unexplained only
+/// when what is left above the row's own noise level also exceeds this many of its
+/// [`NOISE_ROW_SCATTER`]: near the noise, a row's held-out energy moves by its own scatter,
+/// and a row at its noise plus that scatter is not a gap something else leaves.
+pub const ROW_SCATTER_SIGMAS: f64 = 3.0;
 /// A second effect is reported when it adds at least this share of the explainable gap.
 pub const SECOND_MIN: f64 = 0.15;
 /// Candidates whose columns correlate at least this much (after the rate is projected

@@ -39,3 +39,15 @@ fn noise_row_profile_has_mean_one() {
     assert!((mean - 1.0).abs() < 1e-3, "mean {mean}");
     assert!(p.iter().all(|&v| v > 0.0));
 }
+
+/// The rows' scatter at the noise is positive on every row and below the row's mean
+/// energy (`NOISE_ROW_PROFILE` × 1.030, the mean the profile was normalised by).
+#[test]
+fn noise_row_scatter_is_positive_and_below_each_rows_level() {
+    for (s, p) in super::NOISE_ROW_SCATTER
+        .iter()
+        .zip(super::NOISE_ROW_PROFILE)
+    {
+        assert!(*s > 0.0 && *s < 1.030 * p, "scatter {s} against level {p}");
+    }
+}
