@@ -298,18 +298,25 @@ mod tests {
         let size = grid(size_range(Effect::AngularVibration), 2)[1];
         let t = Target::Library(Effect::AngularVibration);
         let d = draw_at(t, size, "av".into(), &mut job_rng(202, 0, 1, 0));
-        let dir = std::env::temp_dir().join(format!("paragyro-lod-av-{}", std::process::id()));
-        let path = dir.join("av.csv");
-        d.write_record(&sc, &path).unwrap();
+        let (answer, confirmation) = verdict_of(&sc, &d, "av");
+        assert_eq!(
+            answer,
+            crate::diagnose::Answer::Effect(Effect::AngularVibration),
+            "{confirmation}"
+        );
+    }
+
+    /// The draw recorded (in a temporary directory) and diagnosed: its verdict and the
+    /// confirmation's trials, printed.
+    fn verdict_of(sc: &Scenario, d: &Draw, tag: &str) -> (crate::diagnose::Answer, String) {
+        let dir = std::env::temp_dir().join(format!("paragyro-lod-{tag}-{}", std::process::id()));
+        let path = dir.join(format!("{tag}.csv"));
+        d.write_record(sc, &path).unwrap();
         let rec = record::read_record(&path).unwrap();
         let r = diagnose::diagnose(&rec, &Options::default()).unwrap();
         let _ = std::fs::remove_dir_all(&dir);
-        assert_eq!(
-            r.report.verdict.answer(),
-            crate::diagnose::Answer::Effect(Effect::AngularVibration),
-            "{:?}",
-            r.report.confirmation
-        );
+        let confirmation = format!("{:?}", r.report.confirmation);
+        (r.report.verdict.answer(), confirmation)
     }
 
     /// A force leak at its stated limit (1e-5) on a toleranced development device (`lod 3
@@ -326,17 +333,11 @@ mod tests {
         let ti = Target::all().iter().position(|&x| x == t).unwrap();
         let size = grid(size_range(Effect::ForceLeak), 7)[3];
         let d = draw_at(t, size, "fl".into(), &mut job_rng(303, ti, 3, 1));
-        let dir = std::env::temp_dir().join(format!("paragyro-lod-fl-{}", std::process::id()));
-        let path = dir.join("fl.csv");
-        d.write_record(&sc, &path).unwrap();
-        let rec = record::read_record(&path).unwrap();
-        let r = diagnose::diagnose(&rec, &Options::default()).unwrap();
-        let _ = std::fs::remove_dir_all(&dir);
+        let (answer, confirmation) = verdict_of(&sc, &d, "fl");
         assert_eq!(
-            r.report.verdict.answer(),
+            answer,
             crate::diagnose::Answer::Effect(Effect::ForceLeak),
-            "{:?}",
-            r.report.confirmation
+            "{confirmation}"
         );
     }
 
