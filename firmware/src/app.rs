@@ -701,8 +701,8 @@ where
         let node = self.node.filter(|_| self.half_steps && !self.dirty);
         let steps = node.and_then(|n| self.half_steps_to(n, plan));
         let Some((pa, pb, word2)) = steps else {
-            // one step: the first command, after an error, or steps that would leave the
-            // guard or the amplitude range
+            // one step: without two steps, the first command, after an error, or steps
+            // that would leave the guard
             if self.apply(plan, asf, io).is_err() {
                 self.node = None;
                 return faults | fault::DDS;
