@@ -496,28 +496,16 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
             ax,
             ay,
         };
+        let (u0, u1) = (
+            input(second, pa.accel_x, pa.accel_y),
+            input(second, pa1.accel_x, pa1.accel_y),
+        );
         if opts.pump.half_steps() {
-            let first = first_half.unwrap_or(second);
-            let (axm, aym) = (
-                0.5 * (pa.accel_x + pa1.accel_x),
-                0.5 * (pa.accel_y + pa1.accel_y),
-            );
-            sim.advance(
-                &theta,
-                &input(first, pa.accel_x, pa.accel_y),
-                &input(first, axm, aym),
-            );
-            sim.advance(
-                &theta,
-                &input(second, axm, aym),
-                &input(second, pa1.accel_x, pa1.accel_y),
-            );
+            let first = input(first_half.unwrap_or(second), 0.0, 0.0);
+            let first = (first.omega, first.s);
+            runner::advance_in_halves(&mut sim, &theta, &u0, &u1, first, (u1.omega, u1.s));
         } else {
-            sim.advance(
-                &theta,
-                &input(second, pa.accel_x, pa.accel_y),
-                &input(second, pa1.accel_x, pa1.accel_y),
-            );
+            sim.advance(&theta, &u0, &u1);
         }
     }
     let end_msg = ToFw {

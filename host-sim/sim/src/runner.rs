@@ -432,7 +432,10 @@ pub fn closed_loop_hooked<T: Real>(
         let mut next = (out.pump_hz_next, out.pump_scale_next);
         hooks.inputs(k, &mut u0, &mut u1, &mut next);
         if sc.sim.pump_profile == PumpProfileSpec::HalfSteps {
-            advance_half_steps(&mut sim, &theta, &u0, &u1);
+            // the frequency 1/4 and 3/4 of the way to the command, the scale one step
+            let om = |f: f64| u0.omega + (u1.omega - u0.omega) * f;
+            let (first, second) = ((om(0.25), u1.s), (om(0.75), u1.s));
+            advance_in_halves(&mut sim, &theta, &u0, &u1, first, second);
         } else {
             sim.advance(&theta, &u0, &u1);
         }
@@ -441,38 +444,23 @@ pub fn closed_loop_hooked<T: Real>(
     Ok(())
 }
 
-/// One sample interval of a simulator built at twice the sample rate
-/// ([`PumpProfileSpec::HalfSteps`]): the pump frequency holds the value 1/4 of the way
-/// from `u0` to `u1` over the first half and 3/4 over the second, the pump scale holds
-/// `u1`'s over both (one step), the accelerations move linearly as in
-/// [`GyroSim::advance`].
-pub fn advance_half_steps(sim: &mut GyroSim, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
-    let at = |f: f64| PlantInputs {
-        omega: u0.omega + (u1.omega - u0.omega) * f,
-        s: u0.s + (u1.s - u0.s) * f,
-        ax: u0.ax + (u1.ax - u0.ax) * f,
-        ay: u0.ay + (u1.ay - u0.ay) * f,
-    };
-    let (mid, end) = (at(0.5), at(1.0));
-    let step = |f: f64, a: &PlantInputs, b: &PlantInputs| {
-        let omega = at(f).omega;
-        (
-            PlantInputs {
-                omega,
-                s: u1.s,
-                ..*a
-            },
-            PlantInputs {
-                omega,
-                s: u1.s,
-                ..*b
-            },
-        )
-    };
-    let (a0, a1) = step(0.25, u0, &mid);
-    sim.advance(theta, &a0, &a1);
-    let (b0, b1) = step(0.75, &mid, &end);
-    sim.advance(theta, &b0, &b1);
+/// One sample interval of a simulator built at twice the sample rate: the pump (ω, s)
+/// held at `first` over the first half and at `second` over the second, the
+/// accelerations moving linearly from `u0`'s to `u1`'s as in [`GyroSim::advance`] (the
+/// pump of `u0` and `u1` is not used). [`PumpProfileSpec::HalfSteps`] here, the DDS's two
+/// words in the firmware-in-the-loop plant.
+pub fn advance_in_halves(
+    sim: &mut GyroSim,
+    theta: &Theta,
+    u0: &PlantInputs,
+    u1: &PlantInputs,
+    first: (f64, f64),
+    second: (f64, f64),
+) {
+    let (axm, aym) = (0.5 * (u0.ax + u1.ax), 0.5 * (u0.ay + u1.ay));
+    let held = |(omega, s): (f64, f64), ax: f64, ay: f64| PlantInputs { omega, s, ax, ay };
+    sim.advance(theta, &held(first, u0.ax, u0.ay), &held(first, axm, aym));
+    sim.advance(theta, &held(second, axm, aym), &held(second, u1.ax, u1.ay));
 }
 
 /// Runs one scenario (no twin) with the core in precision `T`.
