@@ -25,7 +25,9 @@ pub enum PumpProfile {
     Staircase,
     /// The frequency moves in two steps per interval that are the linear sweep's means
     /// over its halves (the firmware's `App::set_half_steps`), the scale holds each
-    /// command over the interval: FOH replica for the frequency, ZOH for the scale.
+    /// command over the interval: the frequency's replica is exact for the two steps
+    /// (`lpf::ReplicaChannel::update_pump`; the sweep's FOH replica left the rate +0.23 %
+    /// after a retune), the scale's is ZOH.
     HalfSteps,
 }
 
@@ -201,77 +203,86 @@ pub struct Config {
     pub rate: RateConfig,
 }
 
+/// 2·sqrt(ωy²)·f0 of Table 2, Hz: the pump at twice the sense resonance (a literal, the
+/// test `the_table2_pump_centre_is_twice_the_sense_resonance` holds it to the bit).
+pub const PUMP_CENTRE_TABLE2_HZ: f64 = 21883.952639786974;
+
+/// [`Config::table2`].
+const TABLE2_CONFIG: Config = Config {
+    f0_hz: F0_TABLE2_HZ,
+    fs_hz: 500.0,
+    l0_um: L0_TABLE2_UM,
+    lockin_lpf_order: 4,
+    lockin_lpf_hz: 150.0,
+    pump_amp_ref_v: 1.0,
+    pump_profile: PumpProfile::Linear,
+    nominal: Physical {
+        gamma: 0.0,
+        ..TABLE2
+    },
+    pump_centre_hz: PUMP_CENTRE_TABLE2_HZ,
+    dither: DitherConfig {
+        enabled: true,
+        pump_hz: 2.0e-3 * F0_TABLE2_HZ,
+        freq_hz: 5.0,
+        start_s: 1.0,
+        taper_s: 0.1,
+        scale_frac: 0.1,
+        scale_freq_hz: 1.3,
+    },
+    svf_hz: 10.0,
+    noise_pm_rthz: 1.0,
+    row_sigma_drive: DEFAULT_ROW_SIGMA_DRIVE,
+    row_sigma_sense: DEFAULT_ROW_SIGMA_SENSE,
+    rls: RlsConfig {
+        forgetting: 0.999,
+        p0: 1e4,
+        p_reset: 1.0,
+        trace_bound_factor: 10.0,
+        relinearize_s: 0.1,
+    },
+    monitor: MonitorConfig {
+        gate_startup_s: 0.5,
+        gate_jump_s: 0.5,
+        bad_input_gate_s: 0.2,
+        change_threshold: 1e3,
+        change_alpha: 0.05,
+        change_hold_s: 0.05,
+        full_scale_um: 20.0,
+        accel_full_scale_mps2: 400.0,
+        stuck_samples: 50,
+        excitation_min_fraction: 0.5,
+    },
+    retune: RetuneConfig {
+        enabled: true,
+        ramp_s: 0.5,
+        max_rate_hz_per_s: 200.0,
+        deadband_hz: 2.0,
+        band_margin: 0.05,
+        settle_window_s: 0.5,
+        settle_tol: 2e-5,
+        lock_min_um: 0.2,
+        lock_lost_s: 0.05,
+        min_interval_s: 1.0,
+    },
+    rate: RateConfig {
+        svf_hz: 150.0,
+        coupling_hz: 40.0,
+        full_scale_dps: 1000.0,
+        gate_accel_dps2: 2000.0,
+        gate_s: 0.3,
+        gate_dev_dps: 1.0,
+        walk_dps: 0.3,
+    },
+};
+
 impl Config {
     /// The paper's gyro (Table 2), 1 pm/√Hz front end, the recommended scheme of
     /// FINDINGS §6. The nominal parameters are Table 2 with zero rate.
     pub fn table2() -> Self {
-        let f0_hz = F0_TABLE2_HZ;
-        let mut nominal = TABLE2;
-        nominal.gamma = 0.0;
-        Config {
-            f0_hz,
-            fs_hz: 500.0,
-            l0_um: L0_TABLE2_UM,
-            lockin_lpf_order: 4,
-            lockin_lpf_hz: 150.0,
-            pump_amp_ref_v: 1.0,
-            pump_profile: PumpProfile::Linear,
-            nominal,
-            pump_centre_hz: 2.0 * libm::sqrt(TABLE2.wy2) * f0_hz,
-            dither: DitherConfig {
-                enabled: true,
-                pump_hz: 2.0e-3 * f0_hz,
-                freq_hz: 5.0,
-                start_s: 1.0,
-                taper_s: 0.1,
-                scale_frac: 0.1,
-                scale_freq_hz: 1.3,
-            },
-            svf_hz: 10.0,
-            noise_pm_rthz: 1.0,
-            row_sigma_drive: DEFAULT_ROW_SIGMA_DRIVE,
-            row_sigma_sense: DEFAULT_ROW_SIGMA_SENSE,
-            rls: RlsConfig {
-                forgetting: 0.999,
-                p0: 1e4,
-                p_reset: 1.0,
-                trace_bound_factor: 10.0,
-                relinearize_s: 0.1,
-            },
-            monitor: MonitorConfig {
-                gate_startup_s: 0.5,
-                gate_jump_s: 0.5,
-                bad_input_gate_s: 0.2,
-                change_threshold: 1e3,
-                change_alpha: 0.05,
-                change_hold_s: 0.05,
-                full_scale_um: 20.0,
-                accel_full_scale_mps2: 400.0,
-                stuck_samples: 50,
-                excitation_min_fraction: 0.5,
-            },
-            retune: RetuneConfig {
-                enabled: true,
-                ramp_s: 0.5,
-                max_rate_hz_per_s: 200.0,
-                deadband_hz: 2.0,
-                band_margin: 0.05,
-                settle_window_s: 0.5,
-                settle_tol: 2e-5,
-                lock_min_um: 0.2,
-                lock_lost_s: 0.05,
-                min_interval_s: 1.0,
-            },
-            rate: RateConfig {
-                svf_hz: 150.0,
-                coupling_hz: 40.0,
-                full_scale_dps: 1000.0,
-                gate_accel_dps2: 2000.0,
-                gate_s: 0.3,
-                gate_dev_dps: 1.0,
-                walk_dps: 0.3,
-            },
-        }
+        // a constant copied from one place in `.rodata` (built field by field with a
+        // `libm` square root, the function held 748 B of the image)
+        TABLE2_CONFIG
     }
 
     /// ω0 = 2π f0, rad/s.

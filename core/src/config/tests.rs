@@ -270,3 +270,17 @@ fn table2_is_valid_and_uses_the_physics_constants() {
     assert_eq!(c.l0_um, crate::physics::L0_TABLE2_UM);
     assert_eq!(Config::default(), c);
 }
+
+#[test]
+fn the_table2_pump_centre_is_twice_the_sense_resonance() {
+    let c = Config::table2();
+    let want = 2.0 * libm::sqrt(TABLE2.wy2) * F0_TABLE2_HZ;
+    assert_eq!(
+        c.pump_centre_hz.to_bits(),
+        want.to_bits(),
+        "{} vs {want}",
+        c.pump_centre_hz
+    );
+    assert_eq!(c.nominal.gamma, 0.0);
+    assert_eq!(c.nominal.wy2, TABLE2.wy2);
+}
