@@ -218,6 +218,10 @@ pub struct ReplicaCoeffs<T> {
     phi: [[T; MAX_ORDER]; MAX_ORDER],
     g0: [T; MAX_ORDER],
     g1: [T; MAX_ORDER],
+    /// Γ1 of the pump channels ([`ReplicaChannel::update_pump`]): `g1`, or with
+    /// `pump_half_steps` the Γ1 of an input in two steps per interval, the linear
+    /// sweep's means over its halves (`½·Γ0(ts/2) + ¼·Γ0(ts)`, exact for them).
+    g1_pump: [T; MAX_ORDER],
     c: [T; MAX_ORDER],
     /// C·A: the output's time derivative is C·A·x + C·B·u (C·B = 0 for order ≥ 2).
     ca: [T; MAX_ORDER],
@@ -230,9 +234,13 @@ pub struct ReplicaCoeffs<T> {
 
 impl<T: Real> ReplicaCoeffs<T> {
     /// Designs the replica of an order-`order` Butterworth with cut-off `wc` (rad per
-    /// time unit), sampled every `ts` time units.
+    /// time unit), sampled every `ts` time units. `pump_half_steps`: the pump channels
+    /// move in two steps per interval (`PumpProfile::HalfSteps`), each the mean of the
+    /// linear sweep over its half: between nodes u0 and u1 the input is u0 + ¼·du over
+    /// the first half and u0 + ¾·du over the second, so their Γ1 is
+    /// ¾·∫₀^{ts/2} e^{As}B ds + ¼·∫_{ts/2}^{ts} e^{As}B ds = ½·Γ0(ts/2) + ¼·Γ0(ts).
     #[inline(never)] // set-up only: its own frame, not inlined into App::new (flash, stack)
-    pub fn butterworth(order: usize, wc: f64, ts: f64) -> Self {
+    pub fn butterworth(order: usize, wc: f64, ts: f64, pump_half_steps: bool) -> Self {
         let sys = butterworth_with(order, wc, |a| T::design_cos_sin_f64(a).1);
         let d = foh_discretise(&sys, ts);
         let dn = d.n.min(MAX_ORDER); // (≤ MAX_ORDER already: no bounds checks below)
@@ -241,6 +249,7 @@ impl<T: Real> ReplicaCoeffs<T> {
             phi: [[T::ZERO; MAX_ORDER]; MAX_ORDER],
             g0: [T::ZERO; MAX_ORDER],
             g1: [T::ZERO; MAX_ORDER],
+            g1_pump: [T::ZERO; MAX_ORDER],
             c: [T::ZERO; MAX_ORDER],
             ca: [T::ZERO; MAX_ORDER],
             cb: T::ZERO,
@@ -262,6 +271,15 @@ impl<T: Real> ReplicaCoeffs<T> {
             cb += sys.c[i] * sys.b[i];
         }
         r.cb = T::from_f64(cb);
+        r.g1_pump = r.g1;
+        if pump_half_steps {
+            // Γ0 over the last half of the interval (in `T`: ½ and ¼ are exact)
+            let h = foh_discretise(&sys, 0.5 * ts);
+            for i in 0..dn {
+                r.g1_pump[i] =
+                    T::from_f64(h.g0[i]) * T::from_f64(0.5) + r.g0[i] * T::from_f64(0.25);
+            }
+        }
         // rest state for u = 1: iterate x = Φx + Γ0 (|eig Φ| < 1, converges
         // geometrically) in f64 at design time
         let mut x = [0.0f64; MAX_ORDER];
@@ -322,28 +340,47 @@ impl<T: Real> ReplicaChannel<T> {
         self.update(coeffs, u)
     }
 
+    /// [`ReplicaChannel::update_with`] for a pump channel: between samples the input
+    /// moves as the pump generator does (`ReplicaCoeffs::butterworth`'s
+    /// `pump_half_steps`: a linear sweep, or its two half-interval means), or with
+    /// `hold` it steps at the previous sample instant.
+    #[inline]
+    pub fn update_pump(&mut self, coeffs: &ReplicaCoeffs<T>, u: T, hold: bool) -> T {
+        if hold {
+            self.u_prev = u;
+        }
+        self.update_g1(coeffs, &coeffs.g1_pump, u)
+    }
+
     /// Advances one sample with the new input `u` (FOH) and returns the filtered value.
     ///
     /// The default order (4, `lockin_lpf_order`) runs a kernel written out for it (no
     /// loop, iterator or zeroing overhead on the tick path; the same operations in the
-    /// same order); any other order the loop below. Not inlined: one copy for the five
-    /// channels (the stm32f405 image's 64 KiB flash budget).
-    #[inline(never)]
+    /// same order); any other order the loop below.
+    #[inline(always)]
     pub fn update(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) -> T {
+        self.update_g1(coeffs, &coeffs.g1, u)
+    }
+
+    /// One sample with the slope coefficients `g1` (`coeffs.g1` or `coeffs.g1_pump`).
+    /// Not inlined: one copy for the five channels (the stm32f405 image's 64 KiB flash
+    /// budget).
+    #[inline(never)]
+    fn update_g1(&mut self, coeffs: &ReplicaCoeffs<T>, g1: &[T; MAX_ORDER], u: T) -> T {
         if coeffs.n == 4 {
-            return self.update_4(coeffs, u);
+            return self.update_4(coeffs, g1, u);
         }
-        self.update_loop(coeffs, u)
+        self.update_loop(coeffs, g1, u)
     }
 
     /// [`ReplicaChannel::update`] for any order (the loop form).
     #[inline]
-    fn update_loop(&mut self, coeffs: &ReplicaCoeffs<T>, u: T) -> T {
+    fn update_loop(&mut self, coeffs: &ReplicaCoeffs<T>, g1: &[T; MAX_ORDER], u: T) -> T {
         let n = coeffs.n;
         let du = u - self.u_prev;
         let mut nx = [T::ZERO; MAX_ORDER];
         for (i, nxi) in nx.iter_mut().enumerate().take(n) {
-            let mut acc = coeffs.g0[i] * self.u_prev + coeffs.g1[i] * du;
+            let mut acc = coeffs.g0[i] * self.u_prev + g1[i] * du;
             for (p, xj) in coeffs.phi[i].iter().zip(self.x.iter()).take(n) {
                 acc += *p * *xj;
             }
@@ -358,13 +395,13 @@ impl<T: Real> ReplicaChannel<T> {
     /// in its order: `acc = g0·u_prev + g1·du`, then `+= φ_ij·x_j` for j = 0..4; the
     /// output `0 + Σ c_i·x_i`). States above the order stay zero as in the loop form.
     #[inline(always)]
-    fn update_4(&mut self, co: &ReplicaCoeffs<T>, u: T) -> T {
+    fn update_4(&mut self, co: &ReplicaCoeffs<T>, g1: &[T; MAX_ORDER], u: T) -> T {
         let up = self.u_prev;
         let du = u - up;
         let [x0, x1, x2, x3] = [self.x[0], self.x[1], self.x[2], self.x[3]];
         let row = |i: usize| {
             let p = &co.phi[i];
-            co.g0[i] * up + co.g1[i] * du + p[0] * x0 + p[1] * x1 + p[2] * x2 + p[3] * x3
+            co.g0[i] * up + g1[i] * du + p[0] * x0 + p[1] * x1 + p[2] * x2 + p[3] * x3
         };
         let nx = [row(0), row(1), row(2), row(3)];
         self.x[..4].copy_from_slice(&nx);
@@ -402,12 +439,12 @@ mod tests {
     /// The written-out order-4 kernel gives the loop form's values bit for bit.
     #[test]
     fn order_4_kernel_equals_the_loop() {
-        let co = ReplicaCoeffs::<f32>::butterworth(4, 0.3, 0.05);
+        let co = ReplicaCoeffs::<f32>::butterworth(4, 0.3, 0.05, false);
         let mut fast = ReplicaChannel::at_rest(&co, 0.25);
         let mut slow = fast;
         for k in 0..2000 {
             let u = libm::sinf(k as f32 * 0.037) + if k % 97 == 0 { 3.0 } else { 0.0 };
-            let (a, b) = (fast.update(&co, u), slow.update_loop(&co, u));
+            let (a, b) = (fast.update(&co, u), slow.update_loop(&co, &co.g1, u));
             assert_eq!(a.to_bits(), b.to_bits(), "k = {k}");
             assert_eq!(fast.x.map(f32::to_bits), slow.x.map(f32::to_bits));
         }
@@ -602,7 +639,7 @@ mod tests {
         // r (t - τg) with group delay τg = -d(phase)/dw at 0 = sum of 2 zeta_k / wc.
         let wc = 2.0 * core::f64::consts::PI * 150.0;
         let ts = 1.0 / 500.0;
-        let co = ReplicaCoeffs::<f64>::butterworth(4, wc, ts);
+        let co = ReplicaCoeffs::<f64>::butterworth(4, wc, ts, false);
         let mut ch = ReplicaChannel::at_rest(&co, 0.0);
         let r = 3.0;
         let mut y = 0.0;
@@ -630,6 +667,82 @@ mod tests {
         assert!(ch2.derivative(&co).abs() < 1e-9);
     }
 
+    /// Fine RK4 of `sys` over one interval `ts` in `m` sub-steps with the input `ui(a)`,
+    /// a ∈ [0, 1] the fraction of the interval: at each RK4 stage, or (`held`) at each
+    /// sub-step's midpoint for all its stages (an input that steps on the sub-step grid).
+    fn rk4_interval(
+        sys: &Analog,
+        x: &mut [f64; MAX_ORDER],
+        ts: f64,
+        m: usize,
+        held: bool,
+        ui: &dyn Fn(f64) -> f64,
+    ) {
+        let n = sys.n;
+        let f = |x: &[f64; MAX_ORDER], uu: f64| {
+            let mut d = [0.0; MAX_ORDER];
+            for i in 0..n {
+                d[i] = sys.b[i] * uu;
+                for j in 0..n {
+                    d[i] += sys.a[i][j] * x[j];
+                }
+            }
+            d
+        };
+        let h = ts / m as f64;
+        for i in 0..m {
+            let ah = (i as f64 + 0.5) / m as f64;
+            let (a0, a1) = if held {
+                (ah, ah)
+            } else {
+                (i as f64 / m as f64, (i as f64 + 1.0) / m as f64)
+            };
+            let k1 = f(x, ui(a0));
+            let mut xt = *x;
+            (0..n).for_each(|q| xt[q] = x[q] + 0.5 * h * k1[q]);
+            let k2 = f(&xt, ui(ah));
+            (0..n).for_each(|q| xt[q] = x[q] + 0.5 * h * k2[q]);
+            let k3 = f(&xt, ui(ah));
+            (0..n).for_each(|q| xt[q] = x[q] + h * k3[q]);
+            let k4 = f(&xt, ui(a1));
+            (0..n).for_each(|q| x[q] += h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q]));
+        }
+    }
+
+    #[test]
+    fn the_pump_channel_is_exact_for_two_steps_per_interval() {
+        // the lock-in's 150 Hz 4th order at 500 Hz; a 5 Hz sine of nodes, the input between
+        // two nodes u0, u1 at u0 + du/4 over the first half and u0 + 3du/4 over the second
+        let wc = 2.0 * core::f64::consts::PI * 150.0;
+        let ts = 1.0 / 500.0;
+        let sys = butterworth(4, wc);
+        // (an even number of sub-steps: the step falls between two of them)
+        let half = ReplicaCoeffs::<f64>::butterworth(4, wc, ts, true);
+        let foh = ReplicaCoeffs::<f64>::butterworth(4, wc, ts, false);
+        let (mut ch, mut ch_foh) = (
+            ReplicaChannel::at_rest(&half, 0.0),
+            ReplicaChannel::at_rest(&foh, 0.0),
+        );
+        let mut x = [0.0f64; MAX_ORDER];
+        let u = |k: usize| (2.0 * core::f64::consts::PI * 5.0 * k as f64 * ts).sin();
+        let (mut worst, mut worst_foh, mut peak) = (0.0f64, 0.0f64, 0.0f64);
+        for k in 0..100 {
+            let (u0, u1) = (u(k), u(k + 1));
+            let step = |a: f64| u0 + (u1 - u0) * if a < 0.5 { 0.25 } else { 0.75 };
+            rk4_interval(&sys, &mut x, ts, 400, true, &step);
+            let yref: f64 = (0..4).map(|i| sys.c[i] * x[i]).sum();
+            worst = worst.max((ch.update_pump(&half, u1, false) - yref).abs());
+            worst_foh = worst_foh.max((ch_foh.update_pump(&foh, u1, false) - yref).abs());
+            peak = peak.max(yref.abs());
+        }
+        // exact up to the fine integration's own error; the sweep's (FOH) replica is not
+        assert!(worst < 1e-10 * peak, "half-step replica off by {worst:e}");
+        assert!(worst_foh > 1e3 * worst, "FOH off by {worst_foh:e} only");
+        // the other channels keep the FOH slope coefficients
+        assert_eq!(half.g1, foh.g1);
+        assert_eq!(foh.g1_pump, foh.g1);
+    }
+
     #[test]
     fn foh_matches_fine_integration_for_a_sine() {
         // compare against a fine RK4 integration of the analog model with a sinusoidal
@@ -637,39 +750,13 @@ mod tests {
         let wc = 1.3;
         let ts = 0.7;
         let sys = butterworth(3, wc);
-        let co = ReplicaCoeffs::<f64>::butterworth(3, wc, ts);
+        let co = ReplicaCoeffs::<f64>::butterworth(3, wc, ts, false);
         let mut ch = ReplicaChannel::at_rest(&co, 0.0);
         let mut x = [0.0f64; MAX_ORDER];
         let u = |k: usize| (0.4 * k as f64).sin();
-        let f = |x: &[f64; MAX_ORDER], uu: f64| {
-            let mut d = [0.0; MAX_ORDER];
-            for i in 0..3 {
-                d[i] = sys.b[i] * uu;
-                for j in 0..3 {
-                    d[i] += sys.a[i][j] * x[j];
-                }
-            }
-            d
-        };
-        let m = 400;
         for k in 0..40 {
             let (u0, u1) = (u(k), u(k + 1));
-            let h = ts / m as f64;
-            for i in 0..m {
-                let ui = |s: f64| u0 + (u1 - u0) * s;
-                let a0 = i as f64 / m as f64;
-                let ah = (i as f64 + 0.5) / m as f64;
-                let a1 = (i as f64 + 1.0) / m as f64;
-                let k1 = f(&x, ui(a0));
-                let mut xt = x;
-                (0..3).for_each(|q| xt[q] = x[q] + 0.5 * h * k1[q]);
-                let k2 = f(&xt, ui(ah));
-                (0..3).for_each(|q| xt[q] = x[q] + 0.5 * h * k2[q]);
-                let k3 = f(&xt, ui(ah));
-                (0..3).for_each(|q| xt[q] = x[q] + h * k3[q]);
-                let k4 = f(&xt, ui(a1));
-                (0..3).for_each(|q| x[q] += h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q]));
-            }
+            rk4_interval(&sys, &mut x, ts, 400, false, &|s| u0 + (u1 - u0) * s);
             let y = ch.update(&co, u1);
             let yref: f64 = (0..3).map(|i| sys.c[i] * x[i]).sum();
             assert!((y - yref).abs() < 1e-11, "k {k}: {y} vs {yref}");

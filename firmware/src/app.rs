@@ -55,13 +55,13 @@
 //! step and buffers a second, which [`IoUpdate::pulse_at_half_period`] applies half a
 //! period after DRDY. The steps are chosen so that they are *exactly* the means of a
 //! linear sweep over the two halves of the interval (whole words, `App::half_steps_to`'s
-//! half-word node grid), and the next sample is told that sweep's node: the core's FOH
-//! replica then sees what the DDS does. The amplitude is one step per sample, told to the
+//! half-word node grid), and the next sample is told that sweep's node: the core's
+//! replica of the two steps then sees what the DDS does. The amplitude is one step per sample, told to the
 //! core's ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its
 //! own half steps could not be exact means (the amplitude steps are below one word a
 //! tick). Measured in the loop (firmware/README.md "Firmware in the loop"): the rate's
-//! scale factor over the last second +0.26 % (`drift-retune`), −0.22 % (`rate-step`),
-//! −0.11 % (`startup`), against +0.91 %, +1.83 % and +1.13 % with one step. Not modelled
+//! scale factor over the last second +0.033 % (`drift-retune`), −0.18 % (`rate-step`),
+//! −0.078 % (`startup`), against +0.91 %, +1.83 % and +1.13 % with one step. Not modelled
 //! in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
 //! AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, delta words and ramp
 //! rate) cannot replace the steps: its 8-bit ramp rate (≤ 2.04 µs per step) and 0.116 Hz

@@ -221,7 +221,8 @@ pub(crate) struct Design<T: Real> {
     pub units: Units<T>,
     /// Input checks, gates, monitors.
     pub watch: Watch<T>,
-    /// The replica of the lock-in low-pass (FOH-exact, `lpf`).
+    /// The replica of the lock-in low-pass (`lpf`: FOH-exact; the pump channels exact
+    /// for the pump's profile).
     pub replica: ReplicaCoeffs<T>,
     /// The slow state-variable filter and the synthesis tables (`rows`).
     pub rows: RowDesign<T>,
@@ -269,7 +270,8 @@ impl<T: Real> Design<T> {
         *f_cfg = *cfg;
         *units = Units::of(cfg);
         *watch = Watch::of(cfg);
-        *replica = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts);
+        let half_steps = cfg.pump_profile == PumpProfile::HalfSteps;
+        *replica = ReplicaCoeffs::butterworth(cfg.lockin_lpf_order, wc, ts, half_steps);
         *rows = RowDesign::new(w_svf, ts);
         *rate = RateDesign::of(cfg);
         *fit = Fit::of(cfg);

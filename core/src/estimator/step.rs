@@ -156,10 +156,10 @@ impl<T: Real> State<T> {
         });
         // the commanded pump (frequency and scale) follows the generator's profile
         let hold = u.staircase;
-        let f_dom = rep.dom.update_with(co, dom, hold);
+        let f_dom = rep.dom.update_pump(co, dom, hold);
         let known = Known {
             om: u.om_ref_t + f_dom,
-            dom2: rep.dom2.update_with(co, dom2, hold),
+            dom2: rep.dom2.update_pump(co, dom2, hold),
             omd: rep.dom.derivative(co),
             ds: rep.ds.update_with(co, ds, u.scale_held),
             ax: rep.ax.update(co, acc[0]),

@@ -250,8 +250,8 @@ pub enum PumpProfileSpec {
     /// way (a DDS written at the sample instant and pulsed then and half a period later);
     /// each step holds the linear sweep's mean over its half, so the pump's phase at the
     /// samples is the sweep's. The scale holds the new command over the interval (one
-    /// step). The core's `PumpProfile::HalfSteps`: FOH replica for the frequency, ZOH for
-    /// the scale (README "Pump profile", measured).
+    /// step). The core's `PumpProfile::HalfSteps`: the replica of the two steps for the
+    /// frequency, ZOH for the scale (README "Pump profile", measured).
     #[serde(rename = "half-steps")]
     HalfSteps,
 }
