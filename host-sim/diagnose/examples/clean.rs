@@ -7,7 +7,9 @@
 //! residual over the record's noise, the estimated against the true noise energy ratio,
 //! each device parameter's (calibrated − true)/σ and the held-out energy per row over ν²;
 //! then the 1σ coverage, the mean energy per row over ν² (`NOISE_ROW_PROFILE`) and its
-//! standard deviation across the devices (`NOISE_ROW_SCATTER`).
+//! standard deviation across the devices (`NOISE_ROW_SCATTER`), and how the held-out
+//! residual over the noise and the sense 1st-harmonic rows follow each property of the
+//! draw (correlation across the devices).
 
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::diagnose::{Options, diagnose};
@@ -16,8 +18,15 @@ use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
 use rayon::prelude::*;
 
-/// A device's printed line, its parameters' z and its held-out energy per row over ν².
-type DeviceLine = (String, (Vec<f64>, Vec<f64>));
+/// A device's printed line, its parameters' z, its held-out energy per row over ν², and
+/// its draw's properties ([`FEATURES`]) with its held-out residual over the noise.
+type DeviceLine = (String, (Vec<f64>, Vec<f64>), (Vec<f64>, f64));
+
+/// The properties of a draw the last lines correlate with.
+const FEATURES: [&str; 15] = [
+    "rate", "|rate|", "accel_x", "accel_y", "noise", "mu_x", "mu_y", "mu_xy", "wx2", "wy2", "wxy2",
+    "alpha_x", "alpha_y", "beta1", "beta3",
+];
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<u64> = std::env::args()
@@ -100,16 +109,26 @@ fn main() -> anyhow::Result<()> {
                     .collect::<Vec<_>>()
                     .join(" ")
             );
-            Ok((line, (z, per_row)))
+            let mut feat = vec![
+                dev.rate_dps,
+                dev.rate_dps.abs(),
+                dev.accel_mps2[0],
+                dev.accel_mps2[1],
+                dev.noise_pm_rthz,
+            ];
+            feat.extend(dev.deviations);
+            Ok((line, (z, per_row), (feat, r.residual_over_noise)))
         })
         .collect();
     let mut all = Vec::new();
     let mut rows_all: Vec<Vec<f64>> = Vec::new();
+    let mut draws = Vec::new();
     for r in rows {
-        let (line, (z, per_row)) = r?;
+        let (line, (z, per_row), draw) = r?;
         println!("{line}");
         all.push(z);
         rows_all.push(per_row);
+        draws.push(draw);
     }
     let nrow = rows_all.first().map_or(0, Vec::len);
     let n = rows_all.len() as f64;
@@ -157,5 +176,33 @@ fn main() -> anyhow::Result<()> {
         .map(|z| z.iter().filter(|v| v.abs() <= 1.0).count())
         .sum();
     println!("1σ coverage {c}/{}", 10 * all.len());
+    print_correlations(&draws, &rows_all);
     Ok(())
+}
+
+/// Pearson correlation of two equally long series (0 when either is constant).
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+    if va > 0.0 && vb > 0.0 {
+        cov / (va * vb).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// How the held-out residual over the noise and the sense 1st-harmonic rows' energy over
+/// ν² (their mean, `ROW_LABELS` 6 and 7: the rows that scatter most at the noise) follow
+/// each property of the draw, across the devices.
+fn print_correlations(draws: &[(Vec<f64>, f64)], rows_all: &[Vec<f64>]) {
+    let res: Vec<f64> = draws.iter().map(|d| d.1).collect();
+    let sense1: Vec<f64> = rows_all.iter().map(|r| 0.5 * (r[6] + r[7])).collect();
+    println!("correlation across the devices with: residual/noise, sense 1st-harmonic rows / nu2");
+    for (i, name) in FEATURES.iter().enumerate() {
+        let f: Vec<f64> = draws.iter().map(|d| d.0[i]).collect();
+        println!("{name:<8} {:+.2} {:+.2}", corr(&f, &res), corr(&f, &sense1));
+    }
 }
