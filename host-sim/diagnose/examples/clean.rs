@@ -101,13 +101,11 @@ fn main() -> anyhow::Result<()> {
                 .iter()
                 .map(|e| e.baseline / r.parameter_face.noise_energy_ratio)
                 .collect();
+            let f2 = |v: &[f64]| v.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(" ");
             let line = format!(
-                "{line}\n         rows / nu2 {}",
-                per_row
-                    .iter()
-                    .map(|v| format!("{v:.2}"))
-                    .collect::<Vec<_>>()
-                    .join(" ")
+                "{line}\n         rows / nu2 {}\n         the record's noise per row {}",
+                f2(&per_row),
+                f2(&r.noise_per_row)
             );
             let mut feat = vec![
                 dev.rate_dps,

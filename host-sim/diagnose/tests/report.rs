@@ -231,6 +231,7 @@ fn report() -> impl Strategy<Value = Report> {
                     resimulations: 2,
                 },
                 residual_over_noise: un,
+                noise_per_row: vec![gb, un],
                 confirmation: conf,
                 location,
                 model: "Table 2 (default)".into(),
@@ -261,7 +262,7 @@ fn report() -> impl Strategy<Value = Report> {
 
 /// The keys of report.json (format 3: format 2's — format 1's and the parameter face — and
 /// the confirmation by re-simulation).
-const KEYS: [&str; 27] = [
+const KEYS: [&str; 28] = [
     "closest_library_effect",
     "confirmation",
     "energies",
@@ -272,6 +273,7 @@ const KEYS: [&str; 27] = [
     "gap_fraction_of_baseline",
     "held_out_by_row",
     "model",
+    "noise_per_row",
     "output_error",
     "parameter_face",
     "ranking",

@@ -66,6 +66,9 @@ pub(crate) struct Inputs<'a> {
     pub fit1: &'a ThetaFit,
     /// The record's noise energy ratio ν².
     pub nu2: f64,
+    /// The simulator's lock-in noise at the reference density
+    /// ([`resim::lockin_noise_diff_energy`]).
+    pub e1: &'a [f64; 10],
 }
 
 /// Candidates re-simulated at most (the re-simulation is the cost).
@@ -144,6 +147,7 @@ fn test_one(
         fits,
         fit1,
         nu2,
+        e1,
     } = *inp;
     let ec = cols.of(effect);
     let fit_e = fits.bank.fit(&cols.with(&ec));
@@ -191,11 +195,13 @@ fn test_one(
     // model's error moves fast where a large effect is missing from it, which inflates ν²
     // (a force leak at 7e-4: 9.5 for a noise near 1) and would make this test lenient
     let nu2_e = match &rows_e.before_sim {
-        Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1)?.min(nu2),
+        Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, e1)?.min(nu2),
         None => nu2,
     };
+    // each row's noise level from the development devices' average profile, against which
+    // the rows' scatter (`NOISE_ROW_SCATTER`) was measured (not the record's own, which
+    // the `none` gate uses: the per-row rule's scatter is about this profile)
     let noise = NOISE_ROW_ENERGY * nu2_e;
-    // each row's own noise level (the profile has mean 1: the totals are as before)
     let noise_of = |i: usize| noise * NOISE_ROW_PROFILE[i];
     let above = |e: &[f64; NR]| (0..NR).map(|i| e[i] - noise_of(i)).sum::<f64>();
     let (gap_b, gap_c) = (above(&e_b), above(&e_c));

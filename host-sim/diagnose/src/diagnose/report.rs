@@ -199,9 +199,15 @@ pub struct Report {
     /// ([`super::confirm`]), in the order tested; empty when that test did not run.
     #[serde(default)]
     pub confirmation: Vec<Confirmation>,
-    /// Held-out baseline energy per row over the record's own noise per row
-    /// ([`NOISE_ROW_ENERGY`] × the record's noise energy ratio): about 1 at the noise.
+    /// Held-out baseline energy per row over the record's own noise per row (the mean of
+    /// [`Report::noise_per_row`] × the record's noise energy ratio): about 1 at the noise.
     pub residual_over_noise: f64,
+    /// Each row's noise energy per sample at the reference density (1 pm/√Hz) for this
+    /// record, `ROW_LABELS` order: lock-in noise carried through the record's rows and the
+    /// calibrated θ (× the noise energy ratio for the record's own; about
+    /// `NOISE_ROW_ENERGY` × `NOISE_ROW_PROFILE` on an average device).
+    #[serde(default)]
+    pub noise_per_row: Vec<f64>,
     #[serde(rename = "where")]
     pub location: Where,
     /// The simulator configuration compared with.
@@ -275,6 +281,8 @@ pub(crate) struct Parts<'a> {
     pub place: Located,
     pub far: &'a Far,
     pub confirmation: Vec<Confirmation>,
+    /// Each row's noise energy at the reference density for this record.
+    pub row_noise: [f64; super::NR],
     pub seconds: f64,
     pub timing: BTreeMap<String, f64>,
 }
@@ -318,6 +326,7 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
         },
         output_error: p.far.report.clone(),
         residual_over_noise: d.residual_over_noise,
+        noise_per_row: p.row_noise.to_vec(),
         parameter_face: p.face,
         confirmation: p.confirmation,
         location: p.place.location,

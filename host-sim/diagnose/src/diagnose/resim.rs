@@ -176,7 +176,7 @@ fn channels(o: &LockinOut) -> [f64; 10] {
 /// Lock-in output noise of white displacement noise at 1 pm/√Hz (the simulator's lock-in
 /// at the record's settings, gyro at rest), per channel: the energy of the
 /// second sample-to-sample differences per sample, µm².
-fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
+pub fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
     let h = &rec.header;
     let (mut sim, th, u) = noise_sim(rec)?;
     let mut prev: Option<([f64; 10], [f64; 10])> = None;
@@ -206,14 +206,14 @@ fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
 /// energy of the second sample-to-sample differences of the error between the record and
 /// a re-simulation `sim` of it on `span` (the slow, structural error barely moves between
 /// samples, its second difference even less; the noise does) over the same for 1 pm/√Hz white displacement noise through
-/// the record's lock-in; the median over the ten channels (a structural error that does
-/// move fast lives on a few channels).
+/// the record's lock-in (`e1`, [`lockin_noise_diff_energy`] of the record); the median over
+/// the ten channels (a structural error that does move fast lives on a few channels).
 pub fn noise_energy_ratio(
     rec: &Record,
     sim: &[LockinOut],
     span: std::ops::Range<usize>,
+    e1: &[f64; 10],
 ) -> anyhow::Result<f64> {
-    let e1 = lockin_noise_diff_energy(rec)?;
     let l0 = rec.header.l0_um;
     let err = |k: usize| -> [f64; 10] {
         let (r, o) = (channels(&rec.rows[k].lockin), channels(&sim[k]));

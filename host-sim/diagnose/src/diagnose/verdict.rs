@@ -20,8 +20,8 @@ use super::rank::Fits;
 use super::report::Candidate;
 use super::rows::{Rows, Spans};
 use super::{
-    GAP_MIN, NOISE_ROW_ENERGY, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX,
-    SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    GAP_MIN, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX, SECOND_MIN,
+    SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
 };
 
 /// A one-word answer: `none`, `unknown` or an effect's name (report.json's `verdict` and
@@ -199,11 +199,13 @@ pub(crate) fn decide(
     fits: &Fits,
     ranking: &[Candidate],
     face: &ParameterFace,
+    row_noise: &[f64; NR],
 ) -> Decision {
     let (e0, explainable) = (fits.e0, fits.explainable);
     let gap_fraction = if e0 > 0.0 { explainable / e0 } else { 0.0 };
-    // the record's own noise per row (its noise energy ratio × the rows' at unit density)
-    let noise_row = NOISE_ROW_ENERGY * face.noise_energy_ratio;
+    // the record's own noise per row (its noise energy ratio × this record's rows' at the
+    // reference density, their mean: `noise::row_noise`)
+    let noise_row = row_noise.iter().sum::<f64>() / NR as f64 * face.noise_energy_ratio;
     let hold_rows = fits.bank.hold.rows.max(1) as f64;
     let residual_over_noise = e0 / hold_rows / noise_row;
     // a parameter-face effect the calibration names (anisodamping against a rate table)
