@@ -53,16 +53,17 @@
 //! profile"), +0.9 to +1.8 % in the loop; with the FOH replica the core fails (test
 //! `a_linear_replica_on_the_stepping_dds_fails`). So each tick writes and pulses a first
 //! step and buffers a second, which [`IoUpdate::pulse_at_half_period`] applies half a
-//! period after DRDY. The steps are chosen so that they are *exactly* the means of a
-//! linear sweep over the two halves of the interval (whole words, `App::half_steps_to`'s
-//! half-word node grid), and the next sample is told that sweep's node: the core's
-//! replica of the two steps then sees what the DDS does. The amplitude is one step per sample, told to the
-//! core's ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its
-//! own half steps could not be exact means (the amplitude steps are below one word a
-//! tick). Measured in the loop (firmware/README.md "Firmware in the loop"): the rate's
-//! scale factor over the last second +0.033 % (`drift-retune`), −0.18 % (`rate-step`),
-//! −0.078 % (`startup`), against +0.91 %, +1.83 % and +1.13 % with one step. Not modelled
-//! in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
+//! period after DRDY. The next sample is told the command's word, and the steps are the
+//! means over the two halves of the linear sweep from the word told before to it (the
+//! core's replica of the two steps), rounded to whole words with first-order error
+//! feedback ([`half_steps`]): each step within a word of its mean, the errors not adding
+//! up (their sum stays within half a word). Steps that are *exactly* those means confine
+//! the told pump to a grid of four words (0.93 Hz; [`half_steps`]), and that grid, while
+//! the dither moved the pump, biased the rate by ≈ +0.1 % against the host-only loop
+//! (`drift-retune`, seeds 1–10). The amplitude is one step per sample, told to the core's
+//! ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its own half
+//! steps could not be exact means (the amplitude steps are below one word a tick). Not
+//! modelled in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
 //! AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, delta words and ramp
 //! rate) cannot replace the steps: its 8-bit ramp rate (≤ 2.04 µs per step) and 0.116 Hz
 //! delta resolution make its slowest sweep ≈ 57 kHz/s, far above the core's ≈ 680 Hz/s:
@@ -86,7 +87,7 @@ use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibrat
 use crate::drivers::adxl355::Adxl355;
 
 mod pump;
-pub use pump::{PumpAmplitude, PumpGuard};
+pub use pump::{PumpAmplitude, PumpGuard, half_steps};
 
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
 ///
@@ -225,8 +226,6 @@ pub struct App<AX, AY, XL, DDS> {
     /// Pump Hz per reference word, `2·f_SYSCLK / 2^32` (exact: a power-of-two scaling),
     /// so that [`App::guard_plan`] needs one `f64` division and no multiplication.
     hz_per_ref_word: f64,
-    /// Half of it (a half word of the two steps' nodes).
-    hz_per_half_word: f64,
     /// The guard's ends as `f64` bit patterns: for a validated guard (`0 < min ≤ max`,
     /// finite) `min ≤ hz ≤ max` ⇔ `min_bits ≤ hz_bits ≤ max_bits` for every `hz` (positive
     /// doubles order like their bits; negatives, −0 and NaN fall outside), so the tick's
@@ -245,9 +244,12 @@ pub struct App<AX, AY, XL, DDS> {
     active: Option<(u32, AmplitudeWord)>,
     /// Two steps per sample ([`App::set_half_steps`]).
     half_steps: bool,
-    /// With two steps: twice the node's reference word (a half-word grid); `None` after
-    /// an error (the next command is one step).
+    /// With two steps: the reference word of the pump the next sample is told (the node
+    /// the next interval's steps sweep from); `None` after an error (the next command is
+    /// one step).
     node: Option<i32>,
+    /// With two steps: the last step's rounding error, quarter words ([`half_steps`]).
+    residual: i32,
     /// The DDS buffers may differ from the words in effect: rewrite all before a pulse.
     dirty: bool,
     counters: FwCounters,
@@ -478,7 +480,6 @@ where
             guard: PumpGuard::new(0.0, 0.0),
             guard_words: (0, 0),
             hz_per_ref_word: 1.0,
-            hz_per_half_word: 0.5,
             guard_bits: (0, 0),
             amplitude: PumpAmplitude::UNITY,
             lockin_beyond_um: 0.0,
@@ -487,6 +488,7 @@ where
             active: None,
             half_steps: false,
             node: None,
+            residual: 0,
             dirty: true,
             counters: FwCounters::default(),
             last: Sample {
@@ -521,7 +523,6 @@ where
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
         self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
-        self.hz_per_half_word = sysclk * (1.0 / FTW_SCALE);
         self.guard_bits = (guard.min_hz.to_bits(), guard.max_hz.to_bits());
         self.est.rebuild(valid);
         self.cal_x = cal_x;
@@ -557,15 +558,15 @@ where
     }
 
     /// Two DDS steps per sample (off by default, kept by [`App::configure`]): each tick
-    /// writes the words 1/4 of the way from the pump in effect to the new command and
-    /// pulses IO_UPDATE, then buffers the words 3/4 of the way (frequency word and
-    /// amplitude, rounded to the nearest word) for [`IoUpdate::pulse_at_half_period`].
-    /// Each step holds the mean of the linear sweep over its half of the interval, so the
-    /// core keeps its linear (FOH) replica, `PumpProfile::Linear` (README "Pump profile":
-    /// the one-step staircase biases the rate by 1.2 %). The next sample is told the new
-    /// command's realised pump, the node of that sweep; after a failed write or a pulse
-    /// the line cannot make, the words the DDS holds. The first command after a start or
-    /// an error is one step.
+    /// writes the words 1/4 of the way from the pump told to the last sample to the new
+    /// command's word and pulses IO_UPDATE, then buffers the words 3/4 of the way (the
+    /// frequency rounded to whole words with error feedback, [`half_steps`]; the amplitude
+    /// the command's) for [`IoUpdate::pulse_at_half_period`]. Each step holds the mean of
+    /// the linear sweep over its half of the interval (within a word), so the core keeps
+    /// its replica of the two steps, `PumpProfile::HalfSteps` (README "Pump profile": the
+    /// one-step staircase biases the rate by 1.2 %). The next sample is told the new
+    /// command's word; after a failed write or a pulse the line cannot make, the words the
+    /// DDS holds. The first command after a start or an error is one step.
     pub fn set_half_steps(&mut self, on: bool) {
         self.half_steps = on;
     }
@@ -700,16 +701,15 @@ where
         };
         let node = self.node.filter(|_| self.half_steps && !self.dirty);
         let steps = node.and_then(|n| self.half_steps_to(n, plan));
-        let Some((pa, pb, word2)) = steps else {
+        let Some((pa, pb, residual)) = steps else {
             // one step: without two steps, the first command, after an error, or steps
             // that would leave the guard
             if self.apply(plan, asf, io).is_err() {
                 self.node = None;
                 return faults | fault::DDS;
             }
-            self.node = self
-                .half_steps
-                .then(|| (plan.reference_ftw() as i32).wrapping_mul(2));
+            self.node = self.half_steps.then_some(plan.reference_ftw() as i32);
+            self.residual = 0;
             return faults;
         };
         if self.step_now(pa, asf, io).is_err() {
@@ -732,10 +732,11 @@ where
         if !held {
             return faults | self.hold_active();
         }
-        self.node = Some(word2);
-        // k·(2·f_SYSCLK/2^32) with k = word2/2: the same product, rounded once and scaled
-        // by powers of two (a node on the word grid is told its word's pump)
-        let pump_hz = f64::from(word2 as u32) * self.hz_per_half_word;
+        // the next sample is told the command's word (the end of the sweep the steps
+        // follow), `plan.pump_hz()` bit for bit as in `apply`
+        self.node = Some(plan.reference_ftw() as i32);
+        self.residual = residual;
+        let pump_hz = f64::from(plan.reference_ftw()) * self.hz_per_ref_word;
         self.pump = Some(InEffect {
             plan: pb,
             asf,
@@ -744,35 +745,28 @@ where
         faults
     }
 
-    /// The two frequency steps from the node `n` towards the command `plan`: the first
-    /// `A = round((3p + c)/4)` (p the node, c the command, in reference words), the second
-    /// `B = 3A − 2p` and the new node `p' = 4A − 3p`, so that A and B are exactly the
-    /// means of the linear sweep p → p' over the two halves of the interval: the sweep the
-    /// core's replica assumes. (Whole words cannot make the 1/4 and 3/4 points of p → c;
-    /// their rounding, ±½ word, would be a pump error the core is not told.) Nodes lie on
-    /// a half-word grid within 2 words of the command. The amplitude is one step, the
-    /// command's word over the whole interval (the core's ZOH replica of the scale,
-    /// `PumpProfile::HalfSteps`). `None` if a step or the node would leave the guard, or
-    /// for a word of 2^27 or more (a pump above f_SYSCLK/16: one step, no overflow).
-    fn half_steps_to(&self, node2: i32, plan: PumpPlan) -> Option<(PumpPlan, PumpPlan, i32)> {
+    /// The two frequency steps from the node `node` (the reference word the last sample
+    /// was told) towards the command `plan`, and the residual they leave ([`half_steps`]:
+    /// the half means of the sweep node → command the core's replica assumes, rounded to
+    /// whole words with error feedback). The amplitude is one step, the command's word
+    /// over the whole interval (the core's ZOH replica of the scale,
+    /// `PumpProfile::HalfSteps`). `None` if a step would leave the guard, or for a word
+    /// of 2^27 or more (a pump above f_SYSCLK/16: one step, no overflow).
+    fn half_steps_to(&self, node: i32, plan: PumpPlan) -> Option<(PumpPlan, PumpPlan, i32)> {
         let c = plan.reference_ftw() as i32;
-        // below 2^27 and 2^28 every product and sum here stays below 2^31
-        if !(0..1 << 27).contains(&c) || !(0..1 << 28).contains(&node2) {
+        // below 2^27 every product and sum in `half_steps` stays below 2^31
+        if !(0..1 << 27).contains(&c) || !(0..1 << 27).contains(&node) {
             return None;
         }
-        let w = |k: i32, x: i32| k.wrapping_mul(x);
-        let a = w(3, node2).wrapping_add(w(2, c)).wrapping_add(4) >> 3;
-        let b = w(3, a).wrapping_sub(node2);
-        let word2 = w(8, a).wrapping_sub(w(3, node2));
+        let (a, b, residual) = half_steps(node, c, self.residual);
         let (lo, hi) = (self.guard_words.0 as i32, self.guard_words.1 as i32);
-        let inside = lo <= a.min(b) && a.max(b) <= hi && w(2, lo) <= word2 && word2 <= w(2, hi);
-        if !inside {
+        if !(lo <= a.min(b) && a.max(b) <= hi) {
             return None;
         }
         let sysclk = self.chips.dds.sysclk_hz();
         let pa = PumpPlan::from_reference_ftw(a as u32, sysclk)?;
         let pb = PumpPlan::from_reference_ftw(b as u32, sysclk)?;
-        Some((pa, pb, word2))
+        Some((pa, pb, residual))
     }
 
     /// [`PumpGuard::contains`] of the configured guard by its bit patterns (`guard_bits`).
@@ -887,7 +881,8 @@ where
 
     /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before
     /// the first successful DDS write. With two steps per sample ([`App::set_half_steps`])
-    /// the node of the linear sweep the steps follow (on a half-word grid).
+    /// the end of the sweep the steps follow: the command's word (the DDS then runs the
+    /// second step, the mean of the sweep's second half to within a word).
     pub fn pump_hz(&self) -> f64 {
         self.pump.map_or(f64::NAN, |p| p.pump_hz)
     }

@@ -67,9 +67,11 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     );
     assert_eq!((s.ticks, s.bad_ticks), (5001, 0));
     // two DDS steps per sample: both pulses in the log, the rate's mean over the last
-    // second within 0.1 % on this seed (measured +0.033 %; +0.26 % with the replica of the
+    // second within 0.1 % on this seed (measured +0.001 %; +0.26 % with the replica of the
     // sweep instead of the two steps, +0.91 % with one step and its ZOH replica; over
-    // seeds 1–10 +0.02 to +0.20 %, mean +0.11 %: the target is not met on every seed)
+    // seeds 1–10 −0.078 to +0.085 %, mean +0.015 %, the host-only loop's +0.031 %; with
+    // the steps exact half means of a sweep on a four-word grid, `App::half_steps_to`
+    // before, +0.02 to +0.20 %, mean +0.11 %)
     assert!(
         s.half_period_pulses > 1000,
         "{} half-period pulses",

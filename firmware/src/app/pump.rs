@@ -153,3 +153,67 @@ impl PumpAmplitude {
         }
     }
 }
+
+/// The two DDS frequency steps of one sample interval ([`App::set_half_steps`]): from
+/// the pump the last sample was told, reference word `node`, towards the one the next
+/// sample is told, `command` (the guard's word for the core's command). The core's replica
+/// (`PumpProfile::HalfSteps`) assumes the linear sweep `node → command` over the
+/// interval, held at its means over the two halves: `(3·node + command)/4` over the
+/// first, `(node + 3·command)/4` over the second. Those are quarter words; each step is
+/// the nearest whole word to its mean less the rounding error the step before left
+/// (first-order error feedback, `residual` in quarter words, in `(−2, 2]`), so the
+/// rounding errors do not add up: over any run of steps their sum is the residual, at
+/// most half a word (the DDS's phase stays within half a word times half a sample period
+/// of the told sweeps'), and a steady command gives steady words (no DDS traffic).
+/// Returns the first step, the second and the residual to carry to the next interval.
+///
+/// Why not exact means: steps that are *exactly* the half means of a sweep `p → p'`
+/// satisfy `p' − p = 4·(A − p)`, so the told pump can only move in multiples of four
+/// words (0.93 Hz at 500 MHz SYSCLK); while the dither moves the pump that coarse grid
+/// biased the rate's scale factor by ≈ +0.1 % against the host-only loop (`drift-retune`).
+///
+/// Inputs below 2^28 (every sum here then stays below 2^31); the caller checks the
+/// steps against the guard.
+pub fn half_steps(node: i32, command: i32, residual: i32) -> (i32, i32, i32) {
+    let w = |k: i32, x: i32| k.wrapping_mul(x);
+    // u − e in quarter words; the step is round(u/4) (half up), its error 4·step − u
+    let ua = w(3, node).wrapping_add(command).wrapping_sub(residual);
+    let a = ua.wrapping_add(2) >> 2;
+    let ea = w(4, a).wrapping_sub(ua);
+    let ub = node.wrapping_add(w(3, command)).wrapping_sub(ea);
+    let b = ub.wrapping_add(2) >> 2;
+    (a, b, w(4, b).wrapping_sub(ub))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::half_steps;
+
+    #[test]
+    fn half_steps_hold_a_steady_command_and_carry_their_rounding_error() {
+        // a steady command: its word over both halves, the residual kept (no traffic)
+        for r in -1..=2 {
+            assert_eq!(half_steps(94_151, 94_151, r), (94_151, 94_151, r));
+        }
+        // commands moving by up to ±6 words a tick: each step within a word of its half
+        // mean, and the errors so far add up to the residual (never more than half a word)
+        let (mut node, mut residual, mut sum) = (94_151, 0, 0);
+        let mut x = 0x2545_F491u32;
+        for _ in 0..100_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let command = node + (x % 13) as i32 - 6;
+            let (a, b, r) = half_steps(node, command, residual);
+            // errors in quarter words against the means (3·node + command)/4 and
+            // (node + 3·command)/4
+            let ea = 4 * a - (3 * node + command);
+            let eb = 4 * b - (node + 3 * command);
+            assert!(ea.abs() < 4 && eb.abs() < 4, "{ea} {eb}");
+            sum += ea + eb;
+            assert_eq!(sum, r);
+            assert!((-1..=2).contains(&r));
+            (node, residual) = (command, r);
+        }
+    }
+}
