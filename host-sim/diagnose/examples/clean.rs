@@ -18,9 +18,10 @@ use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
 use rayon::prelude::*;
 
-/// A device's printed line, its parameters' z, its held-out energy per row over ν², and
-/// its draw's properties ([`FEATURES`]) with its held-out residual over the noise.
-type DeviceLine = (String, (Vec<f64>, Vec<f64>), (Vec<f64>, f64));
+/// A device's printed line, its parameters' z, its held-out energy per row over ν² (as it
+/// is, and less the record's own noise per row), and its draw's properties ([`FEATURES`])
+/// with its held-out residual over the noise.
+type DeviceLine = (String, (Vec<f64>, Vec<f64>, Vec<f64>), (Vec<f64>, f64));
 
 /// The properties of a draw the last lines correlate with.
 const FEATURES: [&str; 15] = [
@@ -115,35 +116,32 @@ fn main() -> anyhow::Result<()> {
                 dev.noise_pm_rthz,
             ];
             feat.extend(dev.deviations);
-            Ok((line, (z, per_row), (feat, r.residual_over_noise)))
+            // each row's held-out energy over ν² less the record's own noise level for it
+            let over_own: Vec<f64> = per_row
+                .iter()
+                .zip(&r.noise_per_row)
+                .map(|(e, n)| e - n)
+                .collect();
+            Ok((line, (z, per_row, over_own), (feat, r.residual_over_noise)))
         })
         .collect();
     let mut all = Vec::new();
     let mut rows_all: Vec<Vec<f64>> = Vec::new();
+    let mut own_all: Vec<Vec<f64>> = Vec::new();
     let mut draws = Vec::new();
     for r in rows {
-        let (line, (z, per_row), draw) = r?;
+        let (line, (z, per_row, over_own), draw) = r?;
         println!("{line}");
         all.push(z);
         rows_all.push(per_row);
+        own_all.push(over_own);
         draws.push(draw);
     }
-    let nrow = rows_all.first().map_or(0, Vec::len);
-    let n = rows_all.len() as f64;
-    let mean: Vec<f64> = (0..nrow)
-        .map(|i| rows_all.iter().map(|v| v[i]).sum::<f64>() / n)
-        .collect();
-    // the sample standard deviation across the devices, per row: how far a row's held-out
-    // energy at the noise scatters from one record to the next (`NOISE_ROW_SCATTER`)
-    let sd: Vec<f64> = (0..nrow)
-        .map(|i| {
-            let ss = rows_all
-                .iter()
-                .map(|v| (v[i] - mean[i]).powi(2))
-                .sum::<f64>();
-            (ss / (n - 1.0).max(1.0)).sqrt()
-        })
-        .collect();
+    // the mean and sample standard deviation across the devices, per row: how far a row's
+    // held-out energy at the noise scatters from one record to the next
+    // (`NOISE_ROW_SCATTER`), and about each record's own level (`NOISE_ROW_SCATTER_OWN`)
+    let (mean, sd) = mean_sd(&rows_all);
+    let (mean_own, sd_own) = mean_sd(&own_all);
     let fmt = |v: &[f64]| {
         v.iter()
             .map(|x| format!("{x:.3}"))
@@ -157,6 +155,14 @@ fn main() -> anyhow::Result<()> {
     println!(
         "held-out energy per row / nu2, standard deviation across the devices: {}",
         fmt(&sd)
+    );
+    println!(
+        "held-out energy per row / nu2 less the record's own noise per row, mean: {}",
+        fmt(&mean_own)
+    );
+    println!(
+        "held-out energy per row / nu2 less the record's own noise per row, standard deviation: {}",
+        fmt(&sd_own)
     );
     println!("z columns: {:?}", &names[..10]);
     for i in 0..10 {
@@ -176,6 +182,22 @@ fn main() -> anyhow::Result<()> {
     println!("1σ coverage {c}/{}", 10 * all.len());
     print_correlations(&draws, &rows_all);
     Ok(())
+}
+
+/// Per column of equally long rows: the mean and the sample standard deviation.
+fn mean_sd(rows: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let nrow = rows.first().map_or(0, Vec::len);
+    let n = rows.len() as f64;
+    let mean: Vec<f64> = (0..nrow)
+        .map(|i| rows.iter().map(|v| v[i]).sum::<f64>() / n)
+        .collect();
+    let sd = (0..nrow)
+        .map(|i| {
+            let ss = rows.iter().map(|v| (v[i] - mean[i]).powi(2)).sum::<f64>();
+            (ss / (n - 1.0).max(1.0)).sqrt()
+        })
+        .collect();
+    (mean, sd)
 }
 
 /// Pearson correlation of two equally long series (0 when either is constant).

@@ -347,6 +347,32 @@ impl Columns {
     }
 }
 
+/// The columns of one library effect about `rows` (the re-simulation's rows of
+/// [`super::confirm`]): none for the vibration (its beat is scanned once, on the
+/// calibrated model's rows) and for an effect this record cannot test.
+pub(crate) fn effect_columns(
+    effect: Effect,
+    rec: &Record,
+    opts: &Options,
+    rows: &Rows,
+    spans: &Spans,
+) -> anyhow::Result<Vec<Column>> {
+    if effect.signature() == Some(Signature::Vibration) {
+        return Ok(Vec::new());
+    }
+    Ok(
+        match library_columns(effect, rec, opts, rows, spans, &[])? {
+            Plan::Force(f) => force_columns(
+                &rows.base,
+                &rows.svf,
+                &[(ColumnId::Effect(effect), f.as_ref())],
+            ),
+            Plan::Columns(c) => c,
+            Plan::Vibration(..) | Plan::Untestable(_) => Vec::new(),
+        },
+    )
+}
+
 /// How a library effect is tested on this record.
 enum Plan {
     /// A force term (synthesised with the others).

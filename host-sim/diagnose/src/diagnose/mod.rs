@@ -33,8 +33,8 @@
 //!    constants, fixed before the blind benchmark ran. When this linear test leaves
 //!    `unknown` on a record with a gap above the noise, the significant candidates that
 //!    close most of what the floor closes (at most two) are re-simulated at their fitted
-//!    size ([`confirm`]): an effect whose run leaves the record at its noise (the same 5 %
-//!    and per-row rules) is the verdict.
+//!    size and refined by Gauss–Newton steps ([`confirm`]): an effect whose run leaves the
+//!    record at its noise (the same 5 % and per-row rules) is the verdict.
 //! 5. **How far.** Gap closure on held-out rows `GC = (E0 − E_c)/(E0 − E_floor)`, and the
 //!    output error of the simulator re-run on the record's own inputs (pump frequency and
 //!    amplitude, accelerations, temperature) without and with the effect at its fitted size.
@@ -153,6 +153,16 @@ pub const ROW_UNEXPLAINED_MAX: f64 = 0.5;
 /// [`NOISE_ROW_PROFILE`]). The sense 1st-harmonic rows scatter most (0.30, 0.37).
 pub const NOISE_ROW_SCATTER: [f64; NR] = [
     0.073, 0.204, 0.154, 0.088, 0.116, 0.077, 0.303, 0.370, 0.096, 0.115,
+];
+/// How far a row's held-out energy at the noise scatters about the record's own noise level
+/// for it (`noise::row_noise` × ν²; `ROW_LABELS` order, × the record's ν²): the standard
+/// deviation across clean toleranced development devices of the held-out energy per row
+/// over ν² less the record's own level (`cargo run --profile test -p paragyro-diagnose
+/// --example clean -- 300 48`, its line "less the record's own noise per row, standard
+/// deviation"). The record's own level follows the device: the sense 1st-harmonic rows
+/// scatter 0.11 about it against 0.30–0.37 about [`NOISE_ROW_PROFILE`].
+pub const NOISE_ROW_SCATTER_OWN: [f64; NR] = [
+    0.073, 0.152, 0.139, 0.087, 0.116, 0.078, 0.114, 0.111, 0.096, 0.114,
 ];
 /// The confirmation by re-simulation ([`confirm`]) counts a row as left unexplained only
 /// when what is left above the row's own noise level also exceeds this many of its

@@ -20,8 +20,8 @@ use super::rank::Fits;
 use super::report::Candidate;
 use super::rows::{Rows, Spans};
 use super::{
-    GAP_MIN, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_UNEXPLAINED_MAX, SECOND_MIN,
-    SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
+    GAP_MIN, NOISE_ROW_SCATTER_OWN, NONE_NOISE_MAX, NR, ROW_GAP_MIN, ROW_GAP_SHARE,
+    ROW_SCATTER_SIGMAS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
 };
 
 /// A one-word answer: `none`, `unknown` or an effect's name (report.json's `verdict` and
@@ -246,7 +246,16 @@ pub(crate) fn decide(
     let unexplained_rows = if verdict_cols.is_empty() {
         Vec::new()
     } else {
-        unexplained_rows(cols, rows, spans, fits, &after_fit)
+        let own: [f64; NR] = std::array::from_fn(|i| row_noise[i] * face.noise_energy_ratio);
+        unexplained_rows(
+            cols,
+            rows,
+            spans,
+            fits,
+            &after_fit,
+            &own,
+            face.noise_energy_ratio,
+        )
     };
     let (verdict, verdict_cols, after_fit) = if !verdict_cols.is_empty()
         && (unexplained > UNEXPLAINED_MAX || !unexplained_rows.is_empty())
@@ -304,12 +313,20 @@ fn secondary(
 /// The verdict must explain every row where the gap lives, not just the energy in total: a
 /// row holding a share of the gap that the verdict leaves mostly unexplained means
 /// something else is there (e.g. a quadratic stiffness: its drive DC and 1st quadrature).
+/// Only where what the verdict leaves is above the row's own noise level (`own`, energy
+/// per sample) by more than [`ROW_SCATTER_SIGMAS`] × its scatter about that level
+/// ([`NOISE_ROW_SCATTER_OWN`] × ν²): near the noise, the catch-all's many columns close a
+/// row's held-out energy by that much on no gap at all (blind run 10: an angular vibration
+/// at 1.8× its limit, fitted at 36.3 ± 1.0 °/s, left its drive 1st quadrature at 1.77
+/// against the catch-all's 1.65 and its own level 1.78, and read `unknown`).
 fn unexplained_rows(
     cols: &Columns,
     rows: &Rows,
     spans: &Spans,
     fits: &Fits,
     after_fit: &Fit,
+    own: &[f64; NR],
+    nu2: f64,
 ) -> Vec<usize> {
     let refs: Vec<&[[f64; NR]]> = cols.cols.iter().map(|c| c.v.as_slice()).collect();
     let energy = |f: &Fit| row_energy(f, &rows.y, &refs, &rows.usable, spans.hold.clone());
@@ -323,7 +340,10 @@ fn unexplained_rows(
     (0..NR)
         .filter(|&i| {
             let ga = e_a[i] - e_f[i].min(e_a[i]);
-            g0[i] > ROW_GAP_SHARE * tot && g0[i] > ROW_GAP_MIN && ga > ROW_UNEXPLAINED_MAX * g0[i]
+            g0[i] > ROW_GAP_SHARE * tot
+                && g0[i] > ROW_GAP_MIN
+                && ga > ROW_UNEXPLAINED_MAX * g0[i]
+                && e_a[i] - own[i] > ROW_SCATTER_SIGMAS * NOISE_ROW_SCATTER_OWN[i] * nu2
         })
         .collect()
 }
