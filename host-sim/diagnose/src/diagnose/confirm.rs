@@ -22,8 +22,8 @@ use serde::{Deserialize, Serialize};
 use paragyro_simulator::record::Record;
 
 use super::calibrate::{self, ThetaFit};
-use super::columns::Columns;
-use super::lsq::{Bank, row_energy};
+use super::columns::{Column, Columns};
+use super::lsq::{Bank, Fit, row_energy};
 use super::rank::Fits;
 use super::report::Candidate;
 use super::resim;
@@ -142,6 +142,27 @@ fn both_usable(rows: &Rows, rows_e: &Rows) -> Vec<bool> {
         .collect()
 }
 
+/// The 14 θ columns of `rows_e` and `extra` fitted on its gap over the fit span: the fit
+/// and the held-out energy per row it leaves.
+fn refit(rows_e: &Rows, usable: &[bool], spans: &Spans, extra: &[Column]) -> (Fit, [f64; NR]) {
+    let th = rows_e.theta_columns();
+    let refs: Vec<&[[f64; NR]]> = th
+        .iter()
+        .map(|c| c.as_slice())
+        .chain(extra.iter().map(|c| c.v.as_slice()))
+        .collect();
+    let bank = Bank::build(
+        &refs,
+        &rows_e.y,
+        usable,
+        &spans.fit_blocks,
+        spans.hold.clone(),
+    );
+    let f = bank.fit(&(0..refs.len()).collect::<Vec<_>>());
+    let e = row_energy(&f, &rows_e.y, &refs, usable, spans.hold.clone());
+    (f, e)
+}
+
 /// Gauss–Newton steps of the confirmation: the effect's run, the 14 θ and its size refitted
 /// on the gap it leaves, the run repeated. A large effect's linear fit about the calibrated
 /// model is close in size but leaves the θ it moved off (blind run 10: a thermal drift at
@@ -188,20 +209,7 @@ fn test_one(
     for _ in 0..CONFIRM_STEPS {
         let usable = both_usable(rows, &rows_e);
         let ecols = super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans)?;
-        let th = rows_e.theta_columns();
-        let refs: Vec<&[[f64; NR]]> = th
-            .iter()
-            .map(|c| c.as_slice())
-            .chain(ecols.iter().map(|c| c.v.as_slice()))
-            .collect();
-        let bank = Bank::build(
-            &refs,
-            &rows_e.y,
-            &usable,
-            &spans.fit_blocks,
-            spans.hold.clone(),
-        );
-        let step = bank.fit(&(0..refs.len()).collect::<Vec<_>>());
+        let (step, _) = refit(&rows_e, &usable, spans, &ecols);
         let mut dtheta = [0.0; 14];
         dtheta.copy_from_slice(&step.beta[..14]);
         if let Some(d) = step.beta.get(14) {
@@ -223,19 +231,7 @@ fn test_one(
         rows_e = Rows::build_with(rec, &o, &specs, vib_phase, timing)?;
     }
     // the 14 θ refitted on the gap the effect's run leaves, same spans
-    let usable = both_usable(rows, &rows_e);
-    let th = rows_e.theta_columns();
-    let th_refs: Vec<&[[f64; NR]]> = th.iter().map(|c| c.as_slice()).collect();
-    let bank = Bank::build(
-        &th_refs,
-        &rows_e.y,
-        &usable,
-        &spans.fit_blocks,
-        spans.hold.clone(),
-    );
-    let all: Vec<usize> = (0..14).collect();
-    let after = bank.fit(&all);
-    let e_c = row_energy(&after, &rows_e.y, &th_refs, &usable, spans.hold.clone());
+    let (_, e_c) = refit(&rows_e, &both_usable(rows, &rows_e), spans, &[]);
     let refs: Vec<&[[f64; NR]]> = cols.cols.iter().map(|c| c.v.as_slice()).collect();
     let e_b = row_energy(
         &fits.base_fit,
