@@ -14,6 +14,7 @@
 
 use super::design::{DECIDE_EVERY, Design};
 use super::state::{Conditioned, Replicas, State};
+use crate::complex::Cplx;
 use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
 use crate::monitor::InputCheck;
@@ -86,15 +87,16 @@ impl<T: Real> State<T> {
         let good = chk.ok();
         if good {
             let u = &d.units;
-            let mut env = Envelopes {
-                x0: s.lockin.x0_um * u.inv_l0,
-                y0: s.lockin.y0_um * u.inv_l0,
-                ..Envelopes::default()
+            // built whole (not from `Envelopes::default()`: zeroing `a` and `b` first
+            // cost two `memclr` calls a tick on the chip)
+            let k = u.inv_l0;
+            let scale = |[z1, z2, z3]: [Cplx<T>; 3]| [z1.scale(k), z2.scale(k), z3.scale(k)];
+            let env = Envelopes {
+                x0: s.lockin.x0_um * k,
+                a: scale(s.lockin.x_um),
+                y0: s.lockin.y0_um * k,
+                b: scale(s.lockin.y_um),
             };
-            for i in 0..3 {
-                env.a[i] = s.lockin.x_um[i].scale(u.inv_l0);
-                env.b[i] = s.lockin.y_um[i].scale(u.inv_l0);
-            }
             let acc = [s.accel_mps2[0] * u.accel_nd, s.accel_mps2[1] * u.accel_nd];
             self.last_good = Some(Conditioned {
                 env,
