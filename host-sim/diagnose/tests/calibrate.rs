@@ -65,6 +65,18 @@ fn wy2_tolerance_reads_none_with_its_deviation() {
         }
     }
     assert!(r.residual_over_noise < paragyro_diagnose::diagnose::NONE_NOISE_MAX);
+    // the rate-table face names what else moves (θ14 − θ24) and what would separate it
+    let h = r
+        .parameter_face
+        .hypotheses
+        .iter()
+        .find(|h| h.name == "anisodamping")
+        .unwrap();
+    assert!(
+        h.detail.contains("pick-off") && h.detail.contains("electrical test signal"),
+        "{}",
+        h.detail
+    );
 }
 
 /// μx = μy = 1.05e-3 (+5 %): `none`, both found within 2σ.

@@ -353,7 +353,7 @@ fn hypotheses(
                 size: Some(d),
                 sigma: Some(s),
                 detail: format!(
-                    "the calibrated (θ14 − θ24)/4 departs from the rate table's γ by {:+.3e} ± {:.1e} ({:+.2} °/s): d = −4·Δγ = {d:.3e} ± {s:.1e}{}; manufacturing tolerance of the model's parameters cannot move it (μxy moves θ14 + θ24); a rate-table scale error would",
+                    "the calibrated (θ14 − θ24)/4 departs from the rate table's γ by {:+.3e} ± {:.1e} ({:+.2} °/s): d = −4·Δγ = {d:.3e} ± {s:.1e}{}; manufacturing tolerance of the model's parameters cannot move it (μxy moves θ14 + θ24); a rate-table scale error would move it alike, and so would a delay of the sense pick-off (a sense-only coupling ωxy²·delay of X′, which with a μxy tolerance is this pattern): this record cannot separate them; a check of the rate table separates the first, the sense front end's phase measured with an electrical test signal the second",
                     p.device - p.model,
                     p.sigma,
                     rate_dps_from_gamma(p.device - p.model, rows.omega0),
