@@ -106,6 +106,17 @@ impl<T: Real> Estimator<T> {
         self.state.step(&self.design, s)
     }
 
+    /// Two pump steps per sample whose values the caller knows (`PumpProfile::HalfSteps`):
+    /// the replica takes the next sample's interval as the linear sweep by `hz` that ends
+    /// at that sample's pump (from `pump_hz − hz`), so that steps `a` then `b` are told as
+    /// the sweep `1.5·a − 0.5·b` → `1.5·b − 0.5·a` whose half means they are: the sample's
+    /// pump the latter, `hz = 2·(b − a)`. Without it the sweep starts at the pump the last
+    /// sample was told. For the next step only; a non-finite `hz`, or a sample the input
+    /// check refuses, leaves the sweep as it was.
+    pub fn set_pump_sweep_hz(&mut self, hz: T) {
+        self.state.pump_sweep_hz = hz;
+    }
+
     /// The configuration this estimator was built from.
     pub fn config(&self) -> &Config {
         &self.design.cfg

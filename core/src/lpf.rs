@@ -340,6 +340,12 @@ impl<T: Real> ReplicaChannel<T> {
         self.update(coeffs, u)
     }
 
+    /// The next update's interval starts at input `u` (instead of the last sample's).
+    #[inline(always)]
+    pub fn restart_from(&mut self, u: T) {
+        self.u_prev = u;
+    }
+
     /// [`ReplicaChannel::update_with`] for a pump channel: between samples the input
     /// moves as the pump generator does (`ReplicaCoeffs::butterworth`'s
     /// `pump_half_steps`: a linear sweep, or its two half-interval means), or with

@@ -53,14 +53,18 @@
 //! profile"), +0.9 to +1.8 % in the loop; with the FOH replica the core fails (test
 //! `a_linear_replica_on_the_stepping_dds_fails`). So each tick writes and pulses a first
 //! step and buffers a second, which [`IoUpdate::pulse_at_half_period`] applies half a
-//! period after DRDY. The next sample is told the command's word, and the steps are the
-//! means over the two halves of the linear sweep from the word told before to it (the
-//! core's replica of the two steps), rounded to whole words with first-order error
-//! feedback ([`half_steps`]): each step within a word of its mean, the errors not adding
-//! up (their sum stays within half a word). Steps that are *exactly* those means confine
-//! the told pump to a grid of four words (0.93 Hz; [`half_steps`]), and that grid, while
-//! the dither moved the pump, biased the rate by ≈ +0.1 % against the host-only loop
-//! (`drift-retune`, seeds 1–10). The amplitude is one step per sample, told to the core's
+//! period after DRDY. The steps are the means over the two halves of the linear sweep
+//! from the last command's word to this one's, rounded to whole words with first-order
+//! error feedback ([`half_steps`]: each step within a word of its mean, the errors not
+//! adding up), and the core is told them exactly: the next sample's pump is the end of
+//! the sweep whose half means they are, and that sweep's move goes to
+//! [`Estimator::set_pump_sweep_hz`] (the replica then holds what the DDS does). Telling
+//! one value per sample cannot do that: steps that are *exactly* the half means of a
+//! sweep between told nodes confine the told pump to a grid of four words (0.93 Hz),
+//! which biased the rate by ≈ +0.1 % against the host-only loop (`drift-retune`); the
+//! command's word told with the rounded steps (7f07a93) left the replica a slope one word
+//! off on every tie of the rounding, which the rate row read as a rate offset that kept
+//! the slow RLS gated after a rate step ([`half_steps`]). The amplitude is one step per sample, told to the core's
 //! ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its own half
 //! steps could not be exact means (the amplitude steps are below one word a tick). Not
 //! modelled in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
@@ -244,12 +248,15 @@ pub struct App<AX, AY, XL, DDS> {
     active: Option<(u32, AmplitudeWord)>,
     /// Two steps per sample ([`App::set_half_steps`]).
     half_steps: bool,
-    /// With two steps: the reference word of the pump the next sample is told (the node
-    /// the next interval's steps sweep from); `None` after an error (the next command is
-    /// one step).
+    /// With two steps: the reference word of the last command (the node the next
+    /// interval's steps sweep from); `None` after an error (the next command is one step).
     node: Option<i32>,
     /// With two steps: the last step's rounding error, quarter words ([`half_steps`]).
     residual: i32,
+    /// [`App::hz_per_ref_word`] in `f32` (the sweep: a few words).
+    hz_per_ref_word_f32: f32,
+    /// Half of it (`f64`: the told pump on the half-word grid of the two steps' sweeps).
+    hz_per_half_word: f64,
     /// The DDS buffers may differ from the words in effect: rewrite all before a pulse.
     dirty: bool,
     counters: FwCounters,
@@ -489,6 +496,8 @@ where
             half_steps: false,
             node: None,
             residual: 0,
+            hz_per_ref_word_f32: 1.0,
+            hz_per_half_word: 0.5,
             dirty: true,
             counters: FwCounters::default(),
             last: Sample {
@@ -523,6 +532,8 @@ where
         let word = |hz| guard.plan(hz, sysclk).map_or(0, |p| p.reference_ftw());
         self.guard_words = (word(guard.min_hz), word(guard.max_hz));
         self.hz_per_ref_word = sysclk * (2.0 / FTW_SCALE);
+        self.hz_per_ref_word_f32 = self.hz_per_ref_word as f32;
+        self.hz_per_half_word = sysclk * (1.0 / FTW_SCALE);
         self.guard_bits = (guard.min_hz.to_bits(), guard.max_hz.to_bits());
         self.est.rebuild(valid);
         self.cal_x = cal_x;
@@ -558,15 +569,16 @@ where
     }
 
     /// Two DDS steps per sample (off by default, kept by [`App::configure`]): each tick
-    /// writes the words 1/4 of the way from the pump told to the last sample to the new
-    /// command's word and pulses IO_UPDATE, then buffers the words 3/4 of the way (the
-    /// frequency rounded to whole words with error feedback, [`half_steps`]; the amplitude
-    /// the command's) for [`IoUpdate::pulse_at_half_period`]. Each step holds the mean of
-    /// the linear sweep over its half of the interval (within a word), so the core keeps
-    /// its replica of the two steps, `PumpProfile::HalfSteps` (README "Pump profile": the
-    /// one-step staircase biases the rate by 1.2 %). The next sample is told the new
-    /// command's word; after a failed write or a pulse the line cannot make, the words the
-    /// DDS holds. The first command after a start or an error is one step.
+    /// writes the words 1/4 of the way from the last command's word to the new one's and
+    /// pulses IO_UPDATE, then buffers the words 3/4 of the way (the frequency rounded to
+    /// whole words with error feedback, [`half_steps`]; the amplitude the command's) for
+    /// [`IoUpdate::pulse_at_half_period`]. The core keeps its replica of the two steps,
+    /// `PumpProfile::HalfSteps` (README "Pump profile": the one-step staircase biases the
+    /// rate by 1.2 %), and is told the steps exactly: the next sample's pump is the end of
+    /// the sweep whose half means they are, its move [`Estimator::set_pump_sweep_hz`];
+    /// after a failed write or a pulse the line cannot make, the words the DDS holds. The
+    /// first command after a start or an error is one step. (With
+    /// [`App::tick_with_pump`], the replay's known pump, leave it off.)
     pub fn set_half_steps(&mut self, on: bool) {
         self.half_steps = on;
     }
@@ -733,29 +745,43 @@ where
         if !held {
             return faults | self.hold_active();
         }
-        // the next sample is told the command's word (the end of the sweep the steps
-        // follow), `plan.pump_hz()` bit for bit as in `apply`
         self.node = Some(plan.reference_ftw() as i32);
         self.residual = residual;
-        let pump_hz = f64::from(plan.reference_ftw()) * self.hz_per_ref_word;
+        self.tell_steps(pa, pb, asf);
+        faults
+    }
+
+    /// Two steps in the DDS, `pa` then `pb`: the next sample is told the sweep whose half
+    /// means they are, A and B, (3A − B)/2 → (3B − A)/2 words (the end exact: half a word
+    /// is a power-of-two scaling), a sweep of 2(B − A) words, which the core holds for its
+    /// next step (after one step it has none: the replica sweeps from the pump told
+    /// before). Not inlined (the stm32f405 image's flash).
+    #[inline(never)]
+    fn tell_steps(&mut self, pa: PumpPlan, pb: PumpPlan, asf: AmplitudeWord) {
+        // words below 2^27 (`half_steps_to`): no overflow
+        let (a, b) = (pa.reference_ftw() as i32, pb.reference_ftw() as i32);
+        let sweep = b.wrapping_sub(a).wrapping_mul(2);
+        self.est
+            .set_pump_sweep_hz(sweep as f32 * self.hz_per_ref_word_f32);
+        let end = b.wrapping_mul(3).wrapping_sub(a) as u32;
+        let pump_hz = f64::from(end) * self.hz_per_half_word;
         self.pump = Some(InEffect {
             plan: pb,
             asf,
             pump_hz,
         });
-        faults
     }
 
-    /// The two frequency steps from the node `node` (the reference word the last sample
-    /// was told) towards the command `plan`, and the residual they leave ([`half_steps`]:
-    /// the half means of the sweep node → command the core's replica assumes, rounded to
-    /// whole words with error feedback). The amplitude is one step, the command's word
-    /// over the whole interval (the core's ZOH replica of the scale,
-    /// `PumpProfile::HalfSteps`). `None` if a step would leave the guard, or for a word
-    /// of 2^27 or more (a pump above f_SYSCLK/16: one step, no overflow).
+    /// The two frequency steps from the node `node` (the last command's reference word)
+    /// towards the command `plan`, and the residual they leave ([`half_steps`]: the half
+    /// means of the sweep node → command, rounded to whole words with error feedback).
+    /// The amplitude is one step, the command's word over the whole interval (the core's
+    /// ZOH replica of the scale, `PumpProfile::HalfSteps`).
+    /// `None` if a step would leave the guard, or for a word of 2^27 or more (a pump above
+    /// f_SYSCLK/16: one step, no overflow).
     fn half_steps_to(&self, node: i32, plan: PumpPlan) -> Option<(PumpPlan, PumpPlan, i32)> {
         let c = plan.reference_ftw() as i32;
-        // below 2^27 every product and sum in `half_steps` stays below 2^31
+        // below 2^27 every product and sum here and in `half_steps` stays below 2^31
         if !(0..1 << 27).contains(&c) || !(0..1 << 27).contains(&node) {
             return None;
         }
@@ -882,8 +908,8 @@ where
 
     /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before
     /// the first successful DDS write. With two steps per sample ([`App::set_half_steps`])
-    /// the end of the sweep the steps follow: the command's word (the DDS then runs the
-    /// second step, the mean of the sweep's second half to within a word).
+    /// the end of the sweep whose half means the two steps are, `(3B − A)/2` words (the
+    /// DDS then runs the second step B).
     pub fn pump_hz(&self) -> f64 {
         self.pump.map_or(f64::NAN, |p| p.pump_hz)
     }

@@ -159,15 +159,29 @@ fn two_steps_per_sample_keep_the_scale_factor_through_a_retune() {
 /// Pump Hz per reference word of the boards' AD9959 (the pump word is twice it).
 const HZ_PER_WORD: f64 = 2.0 * DEFAULT_SYSCLK_HZ / FTW_SCALE;
 
-/// The boards' DDS in the host loop, with the firmware's own arithmetic: the core is told
-/// the guard's whole word for each command (the nearest, as `PumpGuard::plan`; the
-/// start's too), and each interval holds the firmware's two whole-word steps
-/// (`paragyro_firmware::app::half_steps`; the first interval one step, as the firmware's
-/// first command). No guard clamp (the run stays far inside it).
+/// The boards' DDS in the host loop, with the firmware's own arithmetic: each interval
+/// holds the firmware's two whole-word steps (`paragyro_firmware::app::half_steps`)
+/// between the guard's whole words for the commands (the nearest, as `PumpGuard::plan`;
+/// the start's too), and the core is told them as the firmware tells them: the next
+/// sample's pump the end of the sweep whose half means they are, `(3B − A)/2` words, the
+/// sweep `2·(B − A)` words (`Estimator::set_pump_sweep_hz`). The first interval is one
+/// step, as the firmware's first command. No guard clamp (the run stays far inside it).
 struct DdsWords {
     f0_hz: f64,
     node: Option<i32>,
     residual: i32,
+    sweep_hz: Option<f32>,
+}
+
+impl DdsWords {
+    fn new(f0_hz: f64) -> Self {
+        DdsWords {
+            f0_hz,
+            node: None,
+            residual: 0,
+            sweep_hz: None,
+        }
+    }
 }
 
 fn word(hz: f64) -> i32 {
@@ -185,6 +199,9 @@ impl LoopHooks<f32> for DdsWords {
         if k == 0 {
             sample.pump_hz = f64::from(word(sample.pump_hz)) * HZ_PER_WORD;
         }
+        if let Some(h) = self.sweep_hz.take() {
+            est.set_pump_sweep_hz(h);
+        }
         est.step(sample)
     }
 
@@ -200,17 +217,17 @@ impl LoopHooks<f32> for DdsWords {
             Some(p) => {
                 let (a, b, residual) = half_steps(p, c, self.residual);
                 self.residual = residual;
-                (a, b)
+                (f64::from(a), f64::from(b))
             }
-            None => (c, c),
+            None => (f64::from(c), f64::from(c)),
         };
         self.node = Some(c);
         // the loop holds ¾·u0 + ¼·u1 over the first half, ¼·u0 + ¾·u1 over the second
         let omega = |w: f64| w * HZ_PER_WORD / (2.0 * self.f0_hz);
-        let (a, b) = (f64::from(a), f64::from(b));
         u0.omega = omega(1.5 * a - 0.5 * b);
         u1.omega = omega(1.5 * b - 0.5 * a);
-        next.0 = f64::from(c) * HZ_PER_WORD;
+        next.0 = (1.5 * b - 0.5 * a) * HZ_PER_WORD;
+        self.sweep_hz = Some((2.0 * (b - a) * HZ_PER_WORD) as f32);
     }
 }
 
@@ -224,11 +241,7 @@ fn the_dds_whole_words_keep_the_scale_factor_of_the_exact_steps() {
     let f0_hz = fw_drift_retune().sim.f0_hz;
     let d: Vec<f64> = (1..=10)
         .map(|seed| {
-            let mut dds = DdsWords {
-                f0_hz,
-                node: None,
-                residual: 0,
-            };
+            let mut dds = DdsWords::new(f0_hz);
             drift_retune_rate_error_with(seed, &mut dds) - drift_retune_rate_error(seed)
         })
         .collect();
@@ -237,5 +250,69 @@ fn the_dds_whole_words_keep_the_scale_factor_of_the_exact_steps() {
     assert!(
         mean.abs() <= 5e-4,
         "scale factor offset {mean:+.2e} ({d:?})"
+    );
+}
+
+/// The loop's `rate-step` (paragyro-fil: 150 → 100 °/s at 3 s, 6 s) on the host with
+/// the pump `hooks` change: the ticks after the step on which the slow RLS is gated, the
+/// health at the end and the rate at the last tick.
+fn rate_step_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> (usize, bool, f64) {
+    let ls = paragyro_fil::by_name("rate-step").unwrap();
+    let mut sc = ls.scenario;
+    sc.sim.pump_profile = PumpProfileSpec::HalfSteps;
+    let cfg = core_config(&sc);
+    assert_eq!(cfg.pump_profile, PumpProfile::HalfSteps);
+    let mut est: Estimator<f32> = cfg.build().unwrap();
+    let (mut gated, mut gated_end, mut rate) = (0, false, f64::NAN);
+    closed_loop_hooked(
+        &sc,
+        seed,
+        &Device::default(),
+        &mut est,
+        hooks,
+        |_| {},
+        |ls| {
+            if ls.t_s >= 3.0 {
+                gated += usize::from(ls.out.health.gated);
+            }
+            gated_end = ls.out.health.gated;
+            rate = ls.out.rate.rate_dps;
+        },
+    )
+    .unwrap();
+    (gated, gated_end, rate)
+}
+
+#[test]
+fn the_dds_whole_words_let_the_slow_rls_take_a_rate_step_as_the_exact_steps_do() {
+    // After the step the narrow channel's rate must stay still for a gate's length before
+    // the slow RLS takes it and its gate ends (core/src/rate.rs). The exact steps: 806–824
+    // gated ticks of 1 501 (seeds 1–5). The told command word with the steps' rounding
+    // errors fed back (7f07a93) made the pump's slope within the interval ½ word smaller
+    // than the told sweep's on every tie: 834–1 499 gated ticks, gated to the end on seed
+    // 1, the rate at the last tick 1.07–1.11 °/s below the exact steps' on every seed.
+    // The told word that makes the interval's mean exact: 818–828, the rate +0.30 °/s
+    // on average (−0.11 to +0.64).
+    let f0_hz = fw_drift_retune().sim.f0_hz;
+    struct Unquantised;
+    impl LoopHooks<f32> for Unquantised {}
+    let mut dr = Vec::new();
+    for seed in 1..=5 {
+        let exact = rate_step_with(seed, &mut Unquantised);
+        let words = rate_step_with(seed, &mut DdsWords::new(f0_hz));
+        eprintln!("rate-step seed {seed}: exact steps {exact:?}, DDS words {words:?}");
+        assert!(!words.1, "seed {seed}: gated at the end ({words:?})");
+        assert!(
+            words.0 <= exact.0 + 30,
+            "seed {seed}: {} gated ticks, the exact steps {}",
+            words.0,
+            exact.0
+        );
+        dr.push(words.2 - exact.2);
+    }
+    let mean = dr.iter().sum::<f64>() / dr.len() as f64;
+    assert!(
+        mean.abs() < 0.5,
+        "the rate at the end {mean:+.3} °/s off the exact steps' on average ({dr:?})"
     );
 }

@@ -92,6 +92,9 @@ pub(crate) struct State<T: Real> {
     pub last_known: Known<T>,
     /// The last valid sample.
     pub last_good: Option<Conditioned<T>>,
+    /// How far the pump sweeps over the next sample's interval as the replica takes it,
+    /// Hz ([`super::Estimator::set_pump_sweep_hz`]; taken by the next step; NaN: none).
+    pub pump_sweep_hz: T,
     // ---- identification
     pub rls1: Rls<T, 8>,
     pub rls2: Rls<T, 6>,
@@ -156,6 +159,7 @@ impl<T: Real> State<T> {
             last_rows: RowSet::default(),
             last_known: Known::default(),
             last_good: None,
+            pump_sweep_hz: T::from_f64(f64::NAN),
             rls1: Rls::blank(),
             rls2: Rls::blank(),
             lin: Linearisation::default(),
@@ -200,6 +204,7 @@ impl<T: Real> State<T> {
             last_rows,
             last_known,
             last_good,
+            pump_sweep_hz,
             rls1,
             rls2,
             lin,
@@ -233,6 +238,7 @@ impl<T: Real> State<T> {
         *last_rows = RowSet::default();
         *last_known = Known::default();
         *last_good = None;
+        *pump_sweep_hz = T::from_f64(f64::NAN);
         *rls1 = Rls::new(rls_settings(cfg, 8.0));
         *rls2 = Rls::new(rls_settings(cfg, 6.0));
         *lin = Linearisation::default();

@@ -33,6 +33,7 @@ impl<T: Real> State<T> {
         let mut events = 0u8;
         self.counters.samples = self.counters.samples.wrapping_add(1);
         let good = self.condition(d, s, &mut events);
+        let sweep = core::mem::replace(&mut self.pump_sweep_hz, T::from_f64(f64::NAN));
         // the held input, in locals (not a copy of the whole struct per stage)
         let Some(Conditioned {
             env,
@@ -43,7 +44,7 @@ impl<T: Real> State<T> {
         else {
             return self.hold_centre(d, events);
         };
-        let exc_var = self.known_signals(d, pump_hz, pump_scale, acc);
+        let exc_var = self.known_signals(d, pump_hz, (good, sweep), pump_scale, acc);
         let excited = self.dithered && exc_var >= self.exc_var_min;
         // forget only while excited: once the dither has excited the regression, a
         // sample without enough excitation holds the RLS memory (λ = 1) instead of
@@ -139,7 +140,14 @@ impl<T: Real> State<T> {
     /// Stage 2: the known signals through the replica of the lock-in low-pass; returns
     /// the excitation meter's variance of the filtered pump-frequency deviation.
     #[inline(always)]
-    fn known_signals(&mut self, d: &Design<T>, pump_hz: f64, pump_scale: T, acc: [T; 2]) -> T {
+    fn known_signals(
+        &mut self,
+        d: &Design<T>,
+        pump_hz: f64,
+        (good, sweep_hz): (bool, T),
+        pump_scale: T,
+        acc: [T; 2],
+    ) -> T {
         let u = &d.units;
         // ω − ω_ref from the small Hz offset: one f64 subtraction, the rest in T keeps
         // ~1e-10 absolute precision (the offset is at most a few % of the pump)
@@ -156,6 +164,13 @@ impl<T: Real> State<T> {
             ax: ReplicaChannel::at_rest(co, acc[0]),
             ay: ReplicaChannel::at_rest(co, acc[1]),
         });
+        // the interval's sweep as the caller gave it (two known steps)
+        if good && sweep_hz.is_finite() {
+            let h = sweep_hz;
+            let d0 = dev - h * u.inv_2f0;
+            rep.dom.restart_from(d0);
+            rep.dom2.restart_from(d0 * (u.two_om_ref + d0));
+        }
         // the commanded pump (frequency and scale) follows the generator's profile
         let hold = u.staircase;
         let f_dom = rep.dom.update_pump(co, dom, hold);

@@ -154,23 +154,33 @@ impl PumpAmplitude {
     }
 }
 
-/// The two DDS frequency steps of one sample interval ([`App::set_half_steps`]): from
-/// the pump the last sample was told, reference word `node`, towards the one the next
-/// sample is told, `command` (the guard's word for the core's command). The core's replica
-/// (`PumpProfile::HalfSteps`) assumes the linear sweep `node → command` over the
-/// interval, held at its means over the two halves: `(3·node + command)/4` over the
-/// first, `(node + 3·command)/4` over the second. Those are quarter words; each step is
-/// the nearest whole word to its mean less the rounding error the step before left
-/// (first-order error feedback, `residual` in quarter words, in `(−2, 2]`), so the
-/// rounding errors do not add up: over any run of steps their sum is the residual, at
-/// most half a word (the DDS's phase stays within half a word times half a sample period
-/// of the told sweeps'), and a steady command gives steady words (no DDS traffic).
-/// Returns the first step, the second and the residual to carry to the next interval.
+/// The two DDS frequency steps of one sample interval ([`App::set_half_steps`]), from
+/// the last command's reference word `node` towards this one's, `command`: the means of
+/// the linear sweep `node → command` over the two halves of the interval,
+/// `(3·node + command)/4` and `(node + 3·command)/4`, quarter words, each rounded to a
+/// whole word less the rounding error the step before left (first-order error feedback,
+/// `residual` in quarter words, in `(−2, 2]`), so the rounding errors do not add up: over
+/// any run of steps their sum is the residual, at most half a word (the DDS's phase stays
+/// within half a word times half a sample period of the sweeps'), and a steady command
+/// gives steady words (no DDS traffic). Returns the first step, the second and the
+/// residual to carry to the next interval.
 ///
-/// Why not exact means: steps that are *exactly* the half means of a sweep `p → p'`
-/// satisfy `p' − p = 4·(A − p)`, so the told pump can only move in multiples of four
-/// words (0.93 Hz at 500 MHz SYSCLK); while the dither moves the pump that coarse grid
-/// biased the rate's scale factor by ≈ +0.1 % against the host-only loop (`drift-retune`).
+/// The core is told the steps exactly: the next sample's pump is the end of the sweep
+/// whose half means they are, `(3B − A)/2`, and that sweep's move over the interval,
+/// `2·(B − A)`, goes to `Estimator::set_pump_sweep_hz`, so that the replica
+/// (`PumpProfile::HalfSteps`) holds what the DDS does, rounding and all. Two earlier rules
+/// told one value per sample and left the replica a pattern it could not see. Steps that
+/// were *exact* half means of a sweep between told nodes confined the told pump to a grid
+/// of four words (`p' − p = 4·(A − p)`, 0.93 Hz at 500 MHz SYSCLK), which biased the
+/// rate's scale factor by ≈ +0.1 % while the dither moved the pump (`drift-retune`). The
+/// command's word told with these steps (7f07a93) left the steps' difference from the
+/// told sweep's half means: on every tie (`command − node ≡ 2 mod 4`, each tick at the
+/// dither's steepest) the first step ½ word up and the second ½ word down, the pump's
+/// slope within the interval one word short of the told sweep's whichever way it moved;
+/// the rate row read that through the ω′ term (the replica's derivative) as a rate offset
+/// following the dither: in `rate-step` the rate at the end ≈ 1 °/s low, and the narrow
+/// channel never still enough after the step for the slow RLS's hand-over (gated to the
+/// end on 2 of 5 seeds).
 ///
 /// Inputs below 2^28 (every sum here then stays below 2^31); the caller checks the
 /// steps against the guard.
