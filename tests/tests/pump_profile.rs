@@ -98,12 +98,14 @@ fn two_steps_per_sample_follow_the_sweep_within_the_scale_factor_target() {
     assert!(rate > 5e-3, "staircase/staircase: rate {rate:.2e}");
 }
 
+/// The loop's pump unchanged: the plant's exact half steps, the core told nothing more.
+struct Unquantised;
+impl LoopHooks<f32> for Unquantised {}
+
 /// The fast rate's mean over the last 1 s of `fw-drift-retune` (the firmware scenario:
 /// ωy² drifts, the pump retunes, the dither stops at 6 s), f32, the generator and the
 /// replica `HalfSteps`, the noise seed `seed`; relative to the true rate.
 fn drift_retune_rate_error(seed: u64) -> f64 {
-    struct Unquantised;
-    impl LoopHooks<f32> for Unquantised {}
     drift_retune_rate_error_with(seed, &mut Unquantised)
 }
 
@@ -114,14 +116,18 @@ fn fw_drift_retune() -> Scenario {
     Scenario::from_file(&path).unwrap()
 }
 
-/// [`drift_retune_rate_error`] with the pump of the loop changed by `hooks`.
-fn drift_retune_rate_error_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> f64 {
-    let mut sc = fw_drift_retune();
+/// Runs `sc` closed-loop (f32, noise seed `seed`) with the generator and the replica
+/// `HalfSteps` and the loop's pump changed by `hooks`, each sample to `visit`.
+fn half_steps_loop(
+    mut sc: Scenario,
+    seed: u64,
+    hooks: &mut dyn LoopHooks<f32>,
+    visit: impl FnMut(&LoopSample<'_, f32>),
+) {
     sc.sim.pump_profile = PumpProfileSpec::HalfSteps;
     let cfg = core_config(&sc);
     assert_eq!(cfg.pump_profile, PumpProfile::HalfSteps);
     let mut est: Estimator<f32> = cfg.build().unwrap();
-    let (mut n, mut err) = (0.0, 0.0);
     closed_loop_hooked(
         &sc,
         seed,
@@ -129,14 +135,22 @@ fn drift_retune_rate_error_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> f6
         &mut est,
         hooks,
         |_| {},
-        |ls| {
-            if ls.t_s >= sc.duration_s - 1.0 {
-                err += ls.out.rate.rate_dps / ls.plant.rate_dps - 1.0;
-                n += 1.0;
-            }
-        },
+        visit,
     )
     .unwrap();
+}
+
+/// [`drift_retune_rate_error`] with the pump of the loop changed by `hooks`.
+fn drift_retune_rate_error_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> f64 {
+    let sc = fw_drift_retune();
+    let from = sc.duration_s - 1.0;
+    let (mut n, mut err) = (0.0, 0.0);
+    half_steps_loop(sc, seed, hooks, |ls| {
+        if ls.t_s >= from {
+            err += ls.out.rate.rate_dps / ls.plant.rate_dps - 1.0;
+            n += 1.0;
+        }
+    });
     err / n
 }
 
@@ -257,29 +271,15 @@ fn the_dds_whole_words_keep_the_scale_factor_of_the_exact_steps() {
 /// the pump `hooks` change: the ticks after the step on which the slow RLS is gated, the
 /// health at the end and the rate at the last tick.
 fn rate_step_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> (usize, bool, f64) {
-    let ls = paragyro_fil::by_name("rate-step").unwrap();
-    let mut sc = ls.scenario;
-    sc.sim.pump_profile = PumpProfileSpec::HalfSteps;
-    let cfg = core_config(&sc);
-    assert_eq!(cfg.pump_profile, PumpProfile::HalfSteps);
-    let mut est: Estimator<f32> = cfg.build().unwrap();
+    let sc = paragyro_fil::by_name("rate-step").unwrap().scenario;
     let (mut gated, mut gated_end, mut rate) = (0, false, f64::NAN);
-    closed_loop_hooked(
-        &sc,
-        seed,
-        &Device::default(),
-        &mut est,
-        hooks,
-        |_| {},
-        |ls| {
-            if ls.t_s >= 3.0 {
-                gated += usize::from(ls.out.health.gated);
-            }
-            gated_end = ls.out.health.gated;
-            rate = ls.out.rate.rate_dps;
-        },
-    )
-    .unwrap();
+    half_steps_loop(sc, seed, hooks, |ls| {
+        if ls.t_s >= 3.0 {
+            gated += usize::from(ls.out.health.gated);
+        }
+        gated_end = ls.out.health.gated;
+        rate = ls.out.rate.rate_dps;
+    });
     (gated, gated_end, rate)
 }
 
@@ -294,8 +294,6 @@ fn the_dds_whole_words_let_the_slow_rls_take_a_rate_step_as_the_exact_steps_do()
     // The told word that makes the interval's mean exact: 818–828, the rate +0.30 °/s
     // on average (−0.11 to +0.64).
     let f0_hz = fw_drift_retune().sim.f0_hz;
-    struct Unquantised;
-    impl LoopHooks<f32> for Unquantised {}
     let mut dr = Vec::new();
     for seed in 1..=5 {
         let exact = rate_step_with(seed, &mut Unquantised);
