@@ -41,6 +41,21 @@ pub struct LoopScenario {
     pub faults: Faults,
     /// Expected outcome.
     pub expect: Expect,
+    /// The leg of the rate whose scale factor and nonlinearity the verdict fits, if any.
+    pub ramp: Option<RampLeg>,
+}
+
+/// A leg of the true rate over ±`full_scale_dps` (`rate-ramp`): the verdict fits its scale
+/// factor and nonlinearity (`paragyro_simulator::rate_response::ramp_fit`, the fit of
+/// `paragyro-sim rate-response`) in the loop and in the host-only loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RampLeg {
+    /// Start of the leg, s.
+    pub from_s: f64,
+    /// End of the leg, s.
+    pub to_s: f64,
+    /// Full scale, °/s.
+    pub full_scale_dps: f64,
 }
 
 /// The scenario of `cargo fw-loop`: `drift-retune` with the accelerations at 4 g (within
@@ -58,6 +73,7 @@ pub fn drift_retune() -> anyhow::Result<LoopScenario> {
             rate: false,
             out_of_band: false,
         },
+        ramp: None,
     })
 }
 
@@ -96,6 +112,35 @@ pub fn rate_step() -> anyhow::Result<LoopScenario> {
             to: 100.0,
             duration_s: 0.0,
         },
+    });
+    Ok(ls)
+}
+
+/// The scale factor and nonlinearity over ±300 °/s on the firmware path: the start-up,
+/// then the rate 150 → 300 °/s over 1 s at 4 s, → −300 °/s over 12 s from 5.5 s (the leg
+/// fitted, as `paragyro-sim rate-response`'s ramp), → 150 °/s over 1 s from 18 s; 20.5 s.
+/// The fit within [`verdict::SCALE_FACTOR_MAX_PPM`] and
+/// [`verdict::NONLINEARITY_MAX_PPM_FS`], the rate within 2 % at the end.
+pub fn rate_ramp() -> anyhow::Result<LoopScenario> {
+    let fs = 300.0;
+    let mut ls = steady("rate-ramp", 20.5)?;
+    let ramp = |t_s: f64, to: f64, duration_s: f64| EventSpec {
+        t_s,
+        kind: EventKind::Ramp {
+            param: PlantParam::RateDps,
+            to,
+            duration_s,
+        },
+    };
+    ls.scenario.events.extend([
+        ramp(4.0, fs, 1.0),
+        ramp(5.5, -fs, 12.0),
+        ramp(18.0, 150.0, 1.0),
+    ]);
+    ls.ramp = Some(RampLeg {
+        from_s: 5.5,
+        to_s: 17.5,
+        full_scale_dps: fs,
     });
     Ok(ls)
 }
@@ -152,10 +197,11 @@ pub fn by_name(name: &str) -> anyhow::Result<LoopScenario> {
         "drift-retune" => drift_retune(),
         "startup" => startup(),
         "rate-step" => rate_step(),
+        "rate-ramp" => rate_ramp(),
         "spi-faults" => spi_faults(),
         "out-of-band" => out_of_band(),
         other => anyhow::bail!(
-            "unknown loop scenario `{other}` (known: drift-retune, startup, rate-step, spi-faults, out-of-band)"
+            "unknown loop scenario `{other}` (known: drift-retune, startup, rate-step, rate-ramp, spi-faults, out-of-band)"
         ),
     }
 }
@@ -181,19 +227,51 @@ pub fn run(
         work_dir: out.to_path_buf(),
     };
     let (fil, host) = std::thread::scope(|s| {
-        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, pump));
+        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, pump, ls.ramp));
         let fil = session::run(&opts);
         (fil, host.join())
     });
     let fil = fil?;
     let host = host.map_err(|_| anyhow::anyhow!("the host-only loop's thread panicked"))??;
-    let summary = verdict::summarize(&ls.scenario, seed, pump, &fil, host, ls.expect, &ls.faults);
+    std::fs::create_dir_all(out)?;
+    write_trace(&out.join("trace.csv"), &fil, &host.rates)?;
+    let summary = verdict::summarize(ls, seed, pump, &fil, host);
     std::fs::create_dir_all(out)?;
     std::fs::write(
         out.join("summary.json"),
         serde_json::to_string_pretty(&summary)? + "\n",
     )?;
     Ok(summary)
+}
+
+/// `trace.csv`: one line per tick, the truth, the firmware's answer and the host-only
+/// loop's rate (empty where the host-only loop has no sample).
+fn write_trace(path: &Path, fil: &session::Session, host_rates: &[f64]) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut s = String::from(
+        "t_s,rate_dps_true,rate_dps,rate_dps_host_only,wy2_true,wy2,pump_hz,sample_ok,inputs_valid,health,instructions\n",
+    );
+    for (k, r) in fil.rows.iter().enumerate() {
+        let host = host_rates.get(k).map_or(String::new(), |v| format!("{v}"));
+        let instr = fil
+            .instructions
+            .get(k)
+            .map_or(String::new(), |v| format!("{v}"));
+        writeln!(
+            s,
+            "{},{},{},{host},{},{},{},{},{},{},{instr}",
+            r.t_s,
+            r.rate_dps_true,
+            r.fw.rate_dps,
+            r.wy2_true,
+            r.fw.wy2,
+            r.dds_pump_hz,
+            u8::from(r.fw.sample_ok),
+            u8::from(r.fw.inputs_valid),
+            r.fw.health,
+        )?;
+    }
+    std::fs::write(path, s).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
 /// `target/fil` under the workspace (or `$CARGO_TARGET_DIR/fil`).

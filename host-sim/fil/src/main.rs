@@ -22,7 +22,7 @@ enum Pump {
 #[derive(Parser, Debug)]
 #[command(name = "paragyro-fil")]
 struct Cli {
-    /// The loop scenario: drift-retune, startup, rate-step, spi-faults.
+    /// The loop scenario: drift-retune, startup, rate-step, rate-ramp, spi-faults, out-of-band.
     #[arg(default_value = "drift-retune")]
     scenario: String,
     /// Output directory (summary.json, logs, pipes).

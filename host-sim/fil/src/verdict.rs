@@ -3,12 +3,13 @@
 
 use paragyro_core::Estimator;
 use paragyro_simulator::lockin::LockinExt;
+use paragyro_simulator::rate_response::{RampFit, ramp_fit};
 use paragyro_simulator::runner;
 use paragyro_simulator::scenario::{EventKind, PlantParam, Scenario};
 use serde::{Deserialize, Serialize};
 
-use crate::chips::Faults;
 use crate::session::{BoardPump, Session};
+use crate::{LoopScenario, RampLeg};
 
 /// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
 /// (the replay's rule, `paragyro_firmware::run::WY2_TOL_OF_DRIFT`).
@@ -25,6 +26,10 @@ pub const RATE_TOL_FRAC: f64 = 0.02;
 /// The loop against the host-only loop: |rate(FIL) − rate(host)| at the end at most this
 /// fraction of the true rate.
 pub const RATE_FIL_VS_HOST_FRAC: f64 = 0.01;
+/// The ramp's scale-factor error at most this, ppm (issue 10: ≤ 0.1 % over ±300 °/s).
+pub const SCALE_FACTOR_MAX_PPM: f64 = 1000.0;
+/// The ramp's nonlinearity at most this, ppm of full scale (issue 10: ≤ 0.1 % FS).
+pub const NONLINEARITY_MAX_PPM_FS: f64 = 1000.0;
 /// The sense amplitude "before the drift" is the mean over this long before it starts, s.
 pub const AMP_BEFORE_S: f64 = 0.5;
 /// The sense amplitude "after the retune" is the mean over the last this long of the run, s.
@@ -55,6 +60,12 @@ pub struct LoopNumbers {
     pub rate_dps_mean_last_s: f64,
     /// Health bits at the end.
     pub health_end: u32,
+    /// The scale factor and nonlinearity of the scenario's ramp leg (`rate-ramp`).
+    #[serde(default)]
+    pub ramp: Option<RampFit>,
+    /// The fast rate of every sample, °/s (for `trace.csv`; not in `summary.json`).
+    #[serde(skip)]
+    pub rates: Vec<f64>,
 }
 
 /// The firmware's fault counters at the end, by name.
@@ -151,6 +162,10 @@ pub struct Summary {
     pub rate_dps_true: f64,
     /// The core's health bits after the last tick.
     pub health_end: u32,
+    /// The scale factor and nonlinearity of the firmware's rate over the scenario's ramp
+    /// leg (`rate-ramp`; the host-only loop's in `host_only.ramp`).
+    #[serde(default)]
+    pub ramp: Option<RampFit>,
     /// The firmware's exit code (0: it ended the session cleanly).
     pub exit_code: Option<i32>,
     /// The host-only closed loop of the same scenario (f32 core, same configuration, the
@@ -211,7 +226,12 @@ pub fn wy2_tolerance(sc: &Scenario) -> f64 {
 /// The host-only closed loop: the same scenario and core configuration (f32), the plant's
 /// pump shaped as the board's DDS moves it (two steps or one per sample), no
 /// quantisation, no SPI.
-pub fn host_only(sc: &Scenario, seed: u64, pump: BoardPump) -> anyhow::Result<LoopNumbers> {
+pub fn host_only(
+    sc: &Scenario,
+    seed: u64,
+    pump: BoardPump,
+    leg: Option<RampLeg>,
+) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
     sc.sim.pump_profile = pump.sim_profile();
     let cfg = crate::session::core_config(&sc, pump.core_profile());
@@ -239,9 +259,10 @@ pub fn host_only(sc: &Scenario, seed: u64, pump: BoardPump) -> anyhow::Result<Lo
             last_pump = ls.out.pump_hz_next;
             health_end = ls.out.health.bits();
             wy2_true = ls.plant.phys[4];
-            rates.push((ls.t_s, ls.out.rate.rate_dps));
+            rates.push((ls.t_s, ls.plant.rate_dps, ls.out.rate.rate_dps));
         },
     )?;
+    let ramp = leg_fit(leg, rates.iter().copied())?;
     let wy2_est = est.wy2();
     Ok(LoopNumbers {
         wy2_est,
@@ -252,9 +273,23 @@ pub fn host_only(sc: &Scenario, seed: u64, pump: BoardPump) -> anyhow::Result<Lo
         bad_ticks: bad,
         pump_end_hz: last_pump,
         rate_dps_est: est.rate_output().rate_dps,
-        rate_dps_mean_last_s: mean_last_s(&sc, rates.into_iter()),
+        rate_dps_mean_last_s: mean_last_s(&sc, rates.iter().map(|r| (r.0, r.2))),
         health_end,
+        ramp,
+        rates: rates.iter().map(|r| r.2).collect(),
     })
+}
+
+/// The fit of `leg` on `(t, true rate, estimate)` (`None` without a leg).
+fn leg_fit(
+    leg: Option<RampLeg>,
+    rates: impl Iterator<Item = (f64, f64, f64)>,
+) -> anyhow::Result<Option<RampFit>> {
+    let Some(leg) = leg else { return Ok(None) };
+    let on_leg = rates
+        .filter(|r| r.0 >= leg.from_s && r.0 < leg.to_s)
+        .map(|r| (r.1, r.2));
+    Ok(Some(ramp_fit(on_leg, leg.full_scale_dps)?))
 }
 
 /// The mean of `(t, v)` over the scenario's last second.
@@ -294,14 +329,13 @@ pub const PUMP_FIL_VS_HOST_HZ: f64 = 0.94;
 
 /// The summary of a session against the host-only loop.
 pub fn summarize(
-    sc: &Scenario,
+    ls: &LoopScenario,
     seed: u64,
     pump: BoardPump,
     s: &Session,
     host: LoopNumbers,
-    expect: Expect,
-    faults: &Faults,
 ) -> Summary {
+    let (sc, expect, faults, leg) = (&ls.scenario, ls.expect, &ls.faults, ls.ramp);
     let end = &s.end;
     let c = end.counters;
     let wy2_est = end.wy2;
@@ -409,6 +443,33 @@ pub fn summarize(
             host.rate_dps_est
         ),
     );
+    let rows = s
+        .rows
+        .iter()
+        .map(|r| (r.t_s, r.rate_dps_true, r.fw.rate_dps));
+    let ramp = match leg_fit(leg, rows) {
+        Ok(fit) => fit,
+        Err(e) => {
+            check(false, format!("the ramp leg: {e}"));
+            None
+        }
+    };
+    if let Some(f) = ramp {
+        check(
+            f.scale_factor_err_ppm.abs() <= SCALE_FACTOR_MAX_PPM,
+            format!(
+                "scale-factor error {:.0} ppm over the ramp (at most {SCALE_FACTOR_MAX_PPM:.0})",
+                f.scale_factor_err_ppm
+            ),
+        );
+        check(
+            f.nonlinearity_ppm_fs <= NONLINEARITY_MAX_PPM_FS,
+            format!(
+                "nonlinearity {:.0} ppm FS over the ramp (at most {NONLINEARITY_MAX_PPM_FS:.0})",
+                f.nonlinearity_ppm_fs
+            ),
+        );
+    }
     let fault = |bit: u8| s.rows.iter().filter(move |r| r.fw.faults & bit != 0);
     use paragyro_firmware::app::fault;
     let dds_fault_ticks = fault(fault::DDS).count() as u32;
@@ -507,6 +568,7 @@ pub fn summarize(
         rate_dps_mean_last_s: mean_last_s(sc, s.rows.iter().map(|r| (r.t_s, r.fw.rate_dps))),
         rate_dps_true: rate_true,
         health_end: s.rows.last().map_or(0, |r| r.fw.health),
+        ramp,
         exit_code: s.exit_code,
         host_only: host,
         wy2_fil_vs_host: vs_host,

@@ -20,7 +20,7 @@ use std::f64::consts::TAU;
 use std::path::Path;
 
 use anyhow::{Context, Result, ensure};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::runner::{self, Precision, RunOptions};
 use crate::scenario::Scenario;
@@ -368,18 +368,51 @@ pub fn ramp(o: &Options) -> Result<(RampResult, Vec<TraceRow>)> {
         + &ev_ramp(T0_S + 1.5, "rate_dps", -fs, 12.0)
         + &ev_ramp(T0_S + 14.0, "rate_dps", 0.0, 1.0);
     let tr = trace(&scenario(&ev, T0_S + 15.5)?, o.precision, o.seed)?;
-    let leg: Vec<&TraceRow> = tr
+    let leg = tr
         .iter()
         .filter(|r| r.t_s >= T0_S + 1.5 && r.t_s < T0_S + 13.5)
-        .collect();
+        .map(|r| (r.rate_dps_true, r.rate_dps_est));
+    let fit = ramp_fit(leg, fs)?;
+    Ok((
+        RampResult {
+            full_scale_dps: fs,
+            scale_factor_err_ppm: fit.scale_factor_err_ppm,
+            nonlinearity_ppm_fs: fit.nonlinearity_ppm_fs,
+            bias_dps: fit.bias_dps,
+            bins: fit.bins,
+            resets: resets_from(&tr, T0_S),
+        },
+        tr,
+    ))
+}
+
+/// The scale factor and nonlinearity of a ramp leg over ±`fs`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RampFit {
+    /// Least-squares scale factor of the bin means, −1, ppm.
+    pub scale_factor_err_ppm: f64,
+    /// Largest |bin mean − fit| over the full scale, ppm of full scale.
+    pub nonlinearity_ppm_fs: f64,
+    /// The fit's offset, °/s.
+    pub bias_dps: f64,
+    /// Bins with samples (of 30 over ±`fs`).
+    pub bins: usize,
+}
+
+/// The fit of [`ramp`] (and of the firmware loop's `rate-ramp`) on `(true, estimate)`
+/// rates of one leg: 30 bins of `2·fs/30` over ±`fs`, each bin's mean estimate against its
+/// mean truth, a least-squares line through the bin means (so each rate counts once,
+/// however long the ramp dwells there); the scale-factor error is its slope − 1 and the
+/// nonlinearity the largest bin mean off the line, over the full scale.
+pub fn ramp_fit(leg: impl Iterator<Item = (f64, f64)>, fs: f64) -> Result<RampFit> {
     let nb = 30usize;
     let mut bins = vec![(0.0, 0.0, 0usize); nb];
-    for r in &leg {
-        let b = (((r.rate_dps_true + fs) / (2.0 * fs)) * nb as f64).floor();
+    for (truth, est) in leg {
+        let b = (((truth + fs) / (2.0 * fs)) * nb as f64).floor();
         if (0.0..nb as f64).contains(&b) {
             let e = &mut bins[b as usize];
-            e.0 += r.rate_dps_true;
-            e.1 += r.rate_dps_est;
+            e.0 += truth;
+            e.1 += est;
             e.2 += 1;
         }
     }
@@ -400,17 +433,12 @@ pub fn ramp(o: &Options) -> Result<(RampResult, Vec<TraceRow>)> {
         .iter()
         .map(|p| (p.1 - (k * p.0 + b)).abs())
         .fold(0.0, f64::max);
-    Ok((
-        RampResult {
-            full_scale_dps: fs,
-            scale_factor_err_ppm: (k - 1.0) * 1e6,
-            nonlinearity_ppm_fs: nl / fs * 1e6,
-            bias_dps: b,
-            bins: pts.len(),
-            resets: resets_from(&tr, T0_S),
-        },
-        tr,
-    ))
+    Ok(RampFit {
+        scale_factor_err_ppm: (k - 1.0) * 1e6,
+        nonlinearity_ppm_fs: nl / fs * 1e6,
+        bias_dps: b,
+        bins: pts.len(),
+    })
 }
 
 /// Mean fast rate over [t0, t1).

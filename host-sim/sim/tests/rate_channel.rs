@@ -183,3 +183,35 @@ fn noise_against_crlb_monte_carlo() {
     let m = ratios.iter().sum::<f64>() / ratios.len() as f64;
     assert!((0.8..1.5).contains(&m), "{ratios:?}");
 }
+
+#[test]
+fn the_ramp_fit_reads_a_known_scale_factor_bias_and_bow() {
+    // a leg of −300..300 °/s read with a slope 1 + 500 ppm, a bias of 0.2 °/s and a bow
+    // of 0.06 °/s at the ends (a parabola): the scale factor, the bias and the bow are what
+    // the fit must find; each bin's mean truth is its samples' (so no quantisation of the
+    // truth enters)
+    let fs = 300.0;
+    let bow = |x: f64| 0.06 * (x / fs).powi(2);
+    let leg = (0..6000).map(|k| {
+        let x = -fs + 2.0 * fs * (f64::from(k) + 0.5) / 6000.0;
+        (x, (1.0 + 500e-6) * x + 0.2 + bow(x))
+    });
+    let f = rate_response::ramp_fit(leg, fs).unwrap();
+    assert_eq!(f.bins, 30);
+    assert!(
+        (f.scale_factor_err_ppm - 500.0).abs() < 1.0,
+        "{}",
+        f.scale_factor_err_ppm
+    );
+    // the parabola's least-squares line sits at its mean (0.02 at 1/3 of the ends'
+    // height); the largest bin off it is an end bin (≈ 0.06 − 0.02 less the bin's
+    // averaging), ≈ 0.036 °/s = 120 ppm of 300
+    assert!(
+        (f.nonlinearity_ppm_fs - 120.0).abs() < 15.0,
+        "{}",
+        f.nonlinearity_ppm_fs
+    );
+    assert!((f.bias_dps - 0.22).abs() < 0.005, "{}", f.bias_dps);
+    // too few rates to fit: an error, not a number
+    assert!(rate_response::ramp_fit([(0.0, 0.0)].into_iter(), fs).is_err());
+}
