@@ -239,6 +239,8 @@ pub struct GyroSim {
     noise: Noise,
     /// Effects beyond eq. (6) (all zero: the nominal model, and the fast path).
     fx: Effects,
+    /// The effect terms of `fx` ([`terms_of`]): the integrator's variant.
+    terms: u8,
     /// Angular vibration frequency Ω_v/ω0 (non-dimensional).
     vib_omega: f64,
     /// Angular vibration phase Ω_v·τ at the current time, wrapped.
@@ -307,6 +309,147 @@ fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
     [xd, xdd + dx, yd, ydd + dy]
 }
 
+/// Which effect terms the integrator carries (its `FX` parameter): none (eq. (6) alone),
+/// every term of [`rhs_fx`], or the terms of one plant effect alone ([`rhs_fx_one`]).
+mod terms {
+    /// Eq. (6) alone, [`super::measure`].
+    pub(super) const NONE: u8 = 0;
+    /// Every term of [`super::rhs_fx`], [`super::measure_fx`].
+    pub(super) const ALL: u8 = 1;
+    /// The pump feedthrough or the pick-off gain alone: eq. (6), [`super::measure_fx`].
+    pub(super) const MEASUREMENT: u8 = 2;
+    /// The geometric nonlinearity alone.
+    pub(super) const GEOMETRIC: u8 = 3;
+    /// The electrostatic softening alone.
+    pub(super) const ELECTROSTATIC: u8 = 4;
+    /// The nonlinear damping alone.
+    pub(super) const NL_DAMPING: u8 = 5;
+    /// The anisodamping alone.
+    pub(super) const ANISODAMPING: u8 = 6;
+    /// The force leak alone.
+    pub(super) const FORCE_LEAK: u8 = 7;
+}
+
+/// The terms of `fx` as one of [`terms`]: the plant terms of one effect alone (with at most
+/// the measurement effects, the runner's thermal drift and lock-in mismatch beside it),
+/// else [`terms::ALL`]. Decided by equality with that one effect's [`Effects`], so an
+/// effect added to [`rhs_fx`] later (a field of its own) runs the general path until it is
+/// given a variant here.
+fn terms_of(fx: &Effects) -> u8 {
+    if !fx.plant_active() {
+        return terms::NONE;
+    }
+    let base = Effects {
+        vib_beat_hz: fx.vib_beat_hz,
+        vib_phase0: fx.vib_phase0,
+        es_pump: fx.es_pump,
+        feedthrough: fx.feedthrough,
+        tcf_ppm_k: fx.tcf_ppm_k,
+        lockin_mismatch: fx.lockin_mismatch,
+        readout_gain: fx.readout_gain,
+        ..Effects::default()
+    };
+    if *fx == base {
+        return terms::MEASUREMENT;
+    }
+    let one = [
+        (
+            Effects {
+                geometric: fx.geometric,
+                ..base
+            },
+            terms::GEOMETRIC,
+        ),
+        (
+            Effects {
+                electrostatic: fx.electrostatic,
+                ..base
+            },
+            terms::ELECTROSTATIC,
+        ),
+        (
+            Effects {
+                nl_damping: fx.nl_damping,
+                ..base
+            },
+            terms::NL_DAMPING,
+        ),
+        (
+            Effects {
+                anisodamping: fx.anisodamping,
+                ..base
+            },
+            terms::ANISODAMPING,
+        ),
+        (
+            Effects {
+                force_leak: fx.force_leak,
+                ..base
+            },
+            terms::FORCE_LEAK,
+        ),
+    ];
+    one.iter()
+        .find(|(e, _)| e == fx)
+        .map_or(terms::ALL, |(_, t)| *t)
+}
+
+/// [`rhs_fx`] when `fx` carries the plant terms of one effect alone (`T`, [`terms_of`];
+/// the angular vibration off, so γv = γv' = 0): the same result, bit for bit. Each term of
+/// [`rhs_fx`] whose size is zero is ±0, and adding ±0 to a sum leaves it as it was (up to
+/// the sign of an exact zero, which no later sum or product turns into a different
+/// non-zero value), so the effect's own term, computed with the same operations, is what
+/// [`rhs_fx`] adds to eq. (6) (the anisodamping's `2γv − d/2` is `−(d/2)`, its
+/// `d/2 − 2γv` is `d/2`). Without the zero terms the sums are shorter: this is where the
+/// diagnosis's re-simulations of one effect spent ~25 % of their time (tests:
+/// `rhs_fx_one_is_rhs_fx_bit_for_bit`, `one_effect_runs_as_the_general_path`).
+#[inline(always)]
+fn rhs_fx_one<const T: u8>(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
+    let [x, xd, y, yd] = *z;
+    let [_, xdd, _, ydd] = rhs(th, z, d);
+    match T {
+        terms::GEOMETRIC => [
+            xd,
+            xdd + -fx.geometric * y * (x * y + 2.0 * xd * yd),
+            yd,
+            ydd + fx.geometric * y * xd * xd,
+        ],
+        terms::ELECTROSTATIC => [
+            xd,
+            xdd,
+            yd,
+            ydd - fx.electrostatic
+                * (if fx.es_pump { d.s } else { 1.0 })
+                * y
+                * (1.0 + ES_C3 * (y * y)),
+        ],
+        terms::NL_DAMPING => [
+            xd,
+            xdd - fx.nl_damping * (x * x) * xd,
+            yd,
+            ydd - fx.nl_damping * (y * y) * yd,
+        ],
+        terms::ANISODAMPING => [
+            xd,
+            xdd + -(0.5 * fx.anisodamping) * yd,
+            yd,
+            ydd + (0.5 * fx.anisodamping) * xd,
+        ],
+        terms::FORCE_LEAK => {
+            let pump = d.s * (1.0 + d.cos2psi);
+            [
+                xd,
+                xdd,
+                yd,
+                ydd + fx.force_leak * pump * x * (th.drive[5] + th.drive[6] * (x * x)),
+            ]
+        }
+        // the measurement effects alone: eq. (6)
+        terms::MEASUREMENT => [xd, xdd, yd, ydd],
+        _ => rhs_fx(th, z, d, fx),
+    }
+}
+
 // =======================================================================================
 // THE MEASUREMENT: what the pick-off delivers to the lock-in mixers. Measurement effects
 // (pump feedthrough, pick-off gain/phase mismatch, ...) go here; `_cos_psi`, `_sin_psi`
@@ -334,12 +477,12 @@ fn measure_fx(z: &[f64; 4], noise: [f64; 2], d: &Drive, fx: &Effects) -> [f64; 2
 #[inline(always)]
 #[cfg(test)]
 fn rk4_step(th: &Theta, z: &[f64; 4], h: f64, da: &Drive, dh: &Drive, de: &Drive) -> [f64; 4] {
-    rk4_step_g::<false>(th, z, h, da, dh, de, &Effects::default())
+    rk4_step_g::<{ terms::NONE }>(th, z, h, da, dh, de, &Effects::default())
 }
 
-/// [`rk4_step`] with (`FX`) or without the effects.
+/// [`rk4_step`] with the effect terms `FX` ([`terms`]).
 #[inline(always)]
-fn rk4_step_g<const FX: bool>(
+fn rk4_step_g<const FX: u8>(
     th: &Theta,
     z: &[f64; 4],
     h: f64,
@@ -348,12 +491,10 @@ fn rk4_step_g<const FX: bool>(
     de: &Drive,
     fx: &Effects,
 ) -> [f64; 4] {
-    let rhs = |th: &Theta, z: &[f64; 4], d: &Drive| {
-        if FX {
-            rhs_fx(th, z, d, fx)
-        } else {
-            rhs(th, z, d)
-        }
+    let rhs = |th: &Theta, z: &[f64; 4], d: &Drive| match FX {
+        terms::NONE => rhs(th, z, d),
+        terms::ALL => rhs_fx(th, z, d, fx),
+        _ => rhs_fx_one::<FX>(th, z, d, fx),
     };
     let hh = 0.5 * h;
     let [x, v, y, w] = *z;
@@ -529,6 +670,7 @@ impl GyroSim {
             lpf,
             noise,
             fx: Effects::default(),
+            terms: terms::NONE,
             vib_omega: 0.0,
             vib_phase: 0.0,
             w: [0.0; HOOK_STATES],
@@ -562,30 +704,60 @@ impl GyroSim {
     pub fn advance(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
         let noise = self.noise.sigma > 0.0;
         let chirp = u1.omega != u0.omega;
+        const ALL: u8 = terms::ALL;
+        const NONE: u8 = terms::NONE;
         if self.fx.hook.is_some() {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, true, true>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, true, true>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, true, true>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, true, true>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, ALL, true>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, ALL, true>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, ALL, true>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, ALL, true>(theta, u0, u1),
             }
-        } else if self.fx.plant_active() {
+        } else if !noise && self.terms != ALL && self.terms != NONE {
+            self.advance_one(theta, u0, u1, chirp);
+        } else if self.terms != NONE {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, true, false>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, true, false>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, true, false>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, true, false>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, ALL, false>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, ALL, false>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, ALL, false>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, ALL, false>(theta, u0, u1),
             }
         } else {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, false, false>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, false, false>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, false, false>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, false, false>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, NONE, false>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, NONE, false>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, NONE, false>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, NONE, false>(theta, u0, u1),
             }
         }
         if self.vib_omega != 0.0 {
             self.vib_phase = wrap_phase(self.vib_phase + self.vib_omega * self.ts);
+        }
+    }
+
+    /// [`GyroSim::advance`] of a noise-free run with one plant effect alone ([`terms_of`]; the
+    /// diagnosis's re-simulations): that effect's own terms ([`rhs_fx_one`]), the same
+    /// result as the general effect path. Kept out of `advance` (not inlined there), which
+    /// then compiles as it did without these variants.
+    #[inline(never)]
+    fn advance_one(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs, chirp: bool) {
+        macro_rules! run_one {
+            ($fx:expr) => {
+                if chirp {
+                    self.run_interval::<false, true, { $fx }, false>(theta, u0, u1)
+                } else {
+                    self.run_interval::<false, false, { $fx }, false>(theta, u0, u1)
+                }
+            };
+        }
+        match self.terms {
+            terms::MEASUREMENT => run_one!(terms::MEASUREMENT),
+            terms::GEOMETRIC => run_one!(terms::GEOMETRIC),
+            terms::ELECTROSTATIC => run_one!(terms::ELECTROSTATIC),
+            terms::NL_DAMPING => run_one!(terms::NL_DAMPING),
+            terms::ANISODAMPING => run_one!(terms::ANISODAMPING),
+            terms::FORCE_LEAK => run_one!(terms::FORCE_LEAK),
+            _ => run_one!(terms::ALL),
         }
     }
 
@@ -607,6 +779,7 @@ impl GyroSim {
     /// lock-in cut-off in [`SimConfig::lpf_hz`]).
     pub fn set_effects(&mut self, fx: Effects, vib_omega: f64) {
         self.fx = fx;
+        self.terms = terms_of(&fx);
         self.vib_omega = if fx.vib_gamma != 0.0 { vib_omega } else { 0.0 };
         self.vib_phase = wrap_phase(self.vib_omega * self.time_tau() + fx.vib_phase0);
     }
@@ -614,7 +787,7 @@ impl GyroSim {
     /// The hot loop: `M/m` lock-in blocks of `m` RK4 steps each (`m` = 32 by default).
     /// `HOOK`: with the external term of `fx.hook` (its force, states and pick-off offset).
     #[inline(always)]
-    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: bool, const HOOK: bool>(
+    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: u8, const HOOK: bool>(
         &mut self,
         theta: &Theta,
         u0: &PlantInputs,
@@ -665,7 +838,7 @@ impl GyroSim {
                 let m = measure_fx(z, n, d, &fx);
                 let o = hk.offset(&hook::HookAt::at(tau, z, w, d));
                 [m[0] + o[0], m[1] + o[1]]
-            } else if FX {
+            } else if FX != terms::NONE {
                 measure_fx(z, n, d, &fx)
             } else {
                 measure(z, n, rc, rs, d)
@@ -678,7 +851,11 @@ impl GyroSim {
             let vib = |r: (f64, f64)| (gv_amp * r.1, gv_amp * vo * r.0);
             let (mut rc, mut rs) = ch.r;
             let jf = j0 as f64;
-            let (gv, gvd) = if FX { vib(vb.r) } else { (0.0, 0.0) };
+            let (gv, gvd) = if FX == terms::ALL {
+                vib(vb.r)
+            } else {
+                (0.0, 0.0)
+            };
             let mut da = Drive {
                 cos2psi: rc * rc - rs * rs,
                 s: u0.s + jf * ds,
@@ -697,7 +874,7 @@ impl GyroSim {
                     self.lpf.push(&mixer_products(xm, ym, rc, rs));
                 }
                 let (hc, hs) = ch.step::<CHIRP>();
-                let (gv, gvd) = if FX {
+                let (gv, gvd) = if FX == terms::ALL {
                     vib(vb.step::<false>())
                 } else {
                     (0.0, 0.0)
@@ -711,7 +888,7 @@ impl GyroSim {
                     gvd,
                 };
                 (rc, rs) = ch.step::<CHIRP>();
-                let (gv, gvd) = if FX {
+                let (gv, gvd) = if FX == terms::ALL {
                     vib(vb.step::<false>())
                 } else {
                     (0.0, 0.0)

@@ -594,3 +594,190 @@ fn th_rest() -> Theta {
     th.drive[6] = 0.0;
     th
 }
+
+/// The effects the integrator runs with one plant effect alone ([`terms_of`]), and sizes
+/// for them: each of the five plant effects, a measurement effect, and with the pump-driven
+/// softening a feedthrough beside it.
+fn single_effects() -> Vec<(Effects, u8)> {
+    let e = Effects::default();
+    vec![
+        (
+            Effects {
+                geometric: 1e-3,
+                ..e
+            },
+            terms::GEOMETRIC,
+        ),
+        (
+            Effects {
+                electrostatic: 1e-3,
+                es_pump: true,
+                feedthrough: 1e-3,
+                ..e
+            },
+            terms::ELECTROSTATIC,
+        ),
+        (
+            Effects {
+                electrostatic: -2e-3,
+                ..e
+            },
+            terms::ELECTROSTATIC,
+        ),
+        (
+            Effects {
+                nl_damping: 1e-3,
+                ..e
+            },
+            terms::NL_DAMPING,
+        ),
+        (
+            Effects {
+                anisodamping: -1e-3,
+                ..e
+            },
+            terms::ANISODAMPING,
+        ),
+        (
+            Effects {
+                force_leak: 1e-2,
+                ..e
+            },
+            terms::FORCE_LEAK,
+        ),
+        (
+            Effects {
+                feedthrough: 1e-3,
+                readout_gain: 1e-2,
+                ..e
+            },
+            terms::MEASUREMENT,
+        ),
+    ]
+}
+
+/// The single-effect right-hand sides are [`rhs_fx`]'s, bit for bit, on states, pump
+/// phases, amplitudes and accelerations drawn over wide ranges, with γv and γv' the ±0
+/// the general path gives them when the vibration is off; and [`terms_of`] picks them only
+/// for one plant effect alone.
+#[test]
+fn rhs_fx_one_is_rhs_fx_bit_for_bit() {
+    use rand::Rng;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+    let th = Theta::table2();
+    let mut u = |a: f64| a * (2.0 * rng.random::<f64>() - 1.0);
+    for (fx, t) in single_effects() {
+        assert_eq!(terms_of(&fx), t, "{fx:?}");
+        for _ in 0..20_000 {
+            let z = [u(3.0), u(3.0), u(1.0), u(1.0)];
+            let d = Drive {
+                cos2psi: u(1.0),
+                s: 1.0 + u(0.3),
+                ax: u(0.05),
+                ay: u(0.05),
+                gv: 0.0 * u(1.0),
+                gvd: 0.0 * u(1.0),
+            };
+            let a = rhs_fx(&th, &z, &d, &fx);
+            let b = match t {
+                terms::GEOMETRIC => rhs_fx_one::<{ terms::GEOMETRIC }>(&th, &z, &d, &fx),
+                terms::ELECTROSTATIC => rhs_fx_one::<{ terms::ELECTROSTATIC }>(&th, &z, &d, &fx),
+                terms::NL_DAMPING => rhs_fx_one::<{ terms::NL_DAMPING }>(&th, &z, &d, &fx),
+                terms::ANISODAMPING => rhs_fx_one::<{ terms::ANISODAMPING }>(&th, &z, &d, &fx),
+                terms::FORCE_LEAK => rhs_fx_one::<{ terms::FORCE_LEAK }>(&th, &z, &d, &fx),
+                _ => rhs_fx_one::<{ terms::MEASUREMENT }>(&th, &z, &d, &fx),
+            };
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "{fx:?} {z:?} {d:?}"
+            );
+        }
+    }
+    let two = Effects {
+        geometric: 1e-3,
+        force_leak: 1e-2,
+        ..Effects::default()
+    };
+    let vib = Effects {
+        force_leak: 1e-2,
+        vib_gamma: 1e-3,
+        ..Effects::default()
+    };
+    let quad = Effects {
+        nl_damping: 1e-3,
+        quadratic: 1e-3,
+        ..Effects::default()
+    };
+    for fx in [two, vib, quad] {
+        assert_eq!(terms_of(&fx), terms::ALL, "{fx:?}");
+    }
+    assert_eq!(terms_of(&Effects::default()), terms::NONE);
+    // as the re-simulations build them (the vibration's default beat set), and beside the
+    // runner's thermal drift and lock-in mismatch
+    let spec = |s: &str| -> crate::effects::EffectSpec { s.parse().unwrap() };
+    let of = |s: &[&str]| {
+        let specs: Vec<_> = s.iter().map(|e| spec(e)).collect();
+        terms_of(&Effects::from_specs(&specs, 1e-4).unwrap())
+    };
+    assert_eq!(of(&["force_leak=7e-4"]), terms::FORCE_LEAK);
+    assert_eq!(
+        of(&["electrostatic_softening=1e-6@1", "thermal_drift=-5"]),
+        terms::ELECTROSTATIC
+    );
+    assert_eq!(
+        of(&["nonlinear_damping=1e-6", "lockin_mismatch=0.01"]),
+        terms::NL_DAMPING
+    );
+    assert_eq!(of(&["thermal_drift=-5"]), terms::NONE);
+    assert_eq!(of(&["angular_vibration=30"]), terms::ALL);
+    assert_eq!(
+        of(&["geometric_nonlinearity=1e-6", "anisodamping=1e-6"]),
+        terms::ALL
+    );
+}
+
+/// A noise-free run with one plant effect (the diagnosis's re-simulations) takes its
+/// single-effect variant and gives the lock-in outputs and the state of the general effect
+/// path, bit for bit, with the pump sweeping (chirp) and steady, from a running gyro.
+#[test]
+fn one_effect_runs_as_the_general_path() {
+    let th = Theta::table2();
+    let u0 = PlantInputs::nominal();
+    let u1 = PlantInputs {
+        omega: u0.omega * (1.0 + 1e-4),
+        s: 1.1,
+        ..u0
+    };
+    let mut start = GyroSim::new(&quiet(128, 1.05), [0.01, 0.0, 0.0, 0.0]).unwrap();
+    run(&mut start, &th, &u0, 25);
+    let bits = |o: &LockinOut| {
+        let mut v = vec![o.x0_um.to_bits(), o.y0_um.to_bits()];
+        for c in o.x_um.iter().chain(&o.y_um) {
+            v.extend([c.re.to_bits(), c.im.to_bits()]);
+        }
+        v
+    };
+    for (fx, t) in single_effects() {
+        let mut one = start.clone();
+        one.set_effects(fx, 0.0);
+        assert_eq!(one.terms, t);
+        let mut all = one.clone();
+        all.terms = terms::ALL;
+        for k in 0..6 {
+            let (a, b) = if k % 2 == 0 { (&u0, &u1) } else { (&u1, &u1) };
+            one.advance(&th, a, b);
+            all.advance(&th, a, b);
+            assert_eq!(
+                bits(&one.lockin()),
+                bits(&all.lockin()),
+                "{fx:?}, sample {k}"
+            );
+            assert_eq!(
+                one.state().map(f64::to_bits),
+                all.state().map(f64::to_bits),
+                "{fx:?}"
+            );
+        }
+    }
+}
