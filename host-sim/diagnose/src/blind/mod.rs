@@ -34,6 +34,8 @@ pub mod device;
 pub mod lod;
 pub mod outside;
 #[cfg(test)]
+mod sigma_tests;
+#[cfg(test)]
 mod tests;
 
 use crate::diagnose::{self, Answer, Model, Options, Report, to_json_sorted};

@@ -1,9 +1,9 @@
 //! Stage 1b, calibration (the parameter face of the gap): the device's parameters
 //! identified from the record by batch least squares of the 14 θ on the rows of the fit
-//! span (cluster-robust covariance), mapped to the physical parameters with their
-//! uncertainties, compared with the model parameter by parameter, and the pattern of the
-//! deviations matched against the parameter-face effects, with plain manufacturing
-//! tolerance (independent deviations) as the null hypothesis.
+//! span (cluster-robust covariance, jackknife over the fit blocks), mapped to the physical
+//! parameters with their uncertainties, compared with the model parameter by parameter,
+//! and the pattern of the deviations matched against the parameter-face effects, with
+//! plain manufacturing tolerance (independent deviations) as the null hypothesis.
 //!
 //! The θ are linear in the rows, so one fit on the gap `y = rows(record) − rows(simulator)`
 //! gives `Δθ`; the simulator is then re-run with the calibrated parameters (its trajectory
@@ -71,7 +71,7 @@ pub struct ParamDeviation {
     pub model: f64,
     /// The calibrated value.
     pub device: f64,
-    /// Its 1σ (cluster-robust).
+    /// Its 1σ (cluster-robust, `lsq::Bank::fit`).
     pub sigma: f64,
     /// `(device − model)/|model|` and its 1σ, when the model's value is not 0.
     pub relative: Option<f64>,
@@ -138,7 +138,7 @@ impl ThetaFit {
 }
 
 /// Batch least squares of the 14 θ columns of the record's rows on the gap `rows.y`,
-/// over the fit span (cluster-robust covariance over its blocks).
+/// over the fit span (cluster-robust covariance over its blocks, [`super::lsq::Bank::fit`]).
 pub(crate) fn fit_theta(rows: &Rows, spans: &Spans) -> ThetaFit {
     let cols = rows.theta_columns();
     let refs: Vec<&[[f64; NR]]> = cols.iter().map(|c| c.as_slice()).collect();

@@ -39,13 +39,15 @@ const NOISE_SEED: u64 = 0x006e_6f69_7365;
 
 /// Lock-in noise at the reference density for the record's `n` samples, per channel in
 /// the order of [`super::resim::channels`], µm: each channel's energy of second
-/// differences per sample is `e1`'s.
-fn lockin_noise(rec: &Record, n: usize, e1: &[f64; 10]) -> Vec<[f64; 10]> {
+/// differences per sample is `e1`'s. `seed`: [`NOISE_SEED`] for the diagnosis; other
+/// seeds give independent realizations (the calibration's σ checked against their spread:
+/// src/blind/sigma_tests.rs).
+pub(crate) fn lockin_noise(rec: &Record, n: usize, e1: &[f64; 10], seed: u64) -> Vec<[f64; 10]> {
     let h = &rec.header;
     let ts = 1.0 / (h.fs_hz * OVERSAMPLE as f64);
     let wc = std::f64::consts::TAU * h.lockin_lpf_hz;
     let co = ReplicaCoeffs::<f64>::butterworth(h.lockin_lpf_order, wc, ts, false);
-    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(NOISE_SEED);
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut gauss = move || {
         // Box–Muller (one of the pair)
         let (u1, u2): (f64, f64) = (rng.random(), rng.random());
@@ -90,21 +92,8 @@ pub(crate) fn row_noise(
     span: Range<usize>,
 ) -> anyhow::Result<[f64; NR]> {
     let n = rec.rows.len();
-    let noise = lockin_noise(rec, n, e1);
-    let pass = run_pass(rec, &rows.cfg, &|k, s| {
-        let v = &noise[k];
-        let l = &mut s.lockin;
-        l.x0_um += v[0];
-        l.x_um[0].re += v[1];
-        l.x_um[0].im += v[2];
-        l.x_um[2].re += v[3];
-        l.x_um[2].im += v[4];
-        l.y0_um += v[5];
-        l.y_um[0].re += v[6];
-        l.y_um[0].im += v[7];
-        l.y_um[2].re += v[8];
-        l.y_um[2].im += v[9];
-    })?;
+    let noise = lockin_noise(rec, n, e1, NOISE_SEED);
+    let pass = with_noise(rec, rows, &noise)?;
     let base = &rows.base;
     let (mut acc, mut m) = ([0.0; NR], 0usize);
     for k in span.filter(|&k| k < n && rows.usable[k] && pass.usable[k]) {
@@ -122,4 +111,27 @@ pub(crate) fn row_noise(
         "no held-out samples to carry the noise through the rows"
     );
     Ok(acc.map(|a| a / m as f64))
+}
+
+/// The estimator pass of the record with `noise` (µm, [`lockin_noise`]'s channels) added to
+/// its lock-in channels, about the rows' model.
+pub(crate) fn with_noise(
+    rec: &Record,
+    rows: &Rows,
+    noise: &[[f64; 10]],
+) -> anyhow::Result<super::rows::Pass> {
+    run_pass(rec, &rows.cfg, &|k, s| {
+        let v = &noise[k];
+        let l = &mut s.lockin;
+        l.x0_um += v[0];
+        l.x_um[0].re += v[1];
+        l.x_um[0].im += v[2];
+        l.x_um[2].re += v[3];
+        l.x_um[2].im += v[4];
+        l.y0_um += v[5];
+        l.y_um[0].re += v[6];
+        l.y_um[0].im += v[7];
+        l.y_um[2].re += v[8];
+        l.y_um[2].im += v[9];
+    })
 }
