@@ -211,20 +211,7 @@ impl Bank {
             cov.iter_mut().for_each(|v| *v *= corr);
         } else {
             // one block: G⁻¹ (ŝ ŝᵀ) G⁻¹ (ŝ is 0 at the fit: no spread to measure)
-            for blk in &self.blocks {
-                let (gb, bb) = blk.sub(s);
-                let sc: Vec<f64> = (0..p)
-                    .map(|i| bb[i] - (0..p).map(|j| gb[i * p + j] * beta[j]).sum::<f64>())
-                    .collect();
-                let d: Vec<f64> = (0..p)
-                    .map(|i| (0..p).map(|j| inv[i * p + j] * sc[j]).sum())
-                    .collect();
-                for i in 0..p {
-                    for j in 0..p {
-                        cov[i * p + j] += d[i] * d[j];
-                    }
-                }
-            }
+            self.add_sandwich(s, &beta, &inv, &mut cov);
         }
         let sigma = (0..p).map(|i| cov[i * p + i].max(0.0).sqrt()).collect();
         Fit {
@@ -246,6 +233,17 @@ impl Bank {
         let (g, b) = self.fit.sub(s);
         let (beta, inv) = solve_spd(&g, &b, p);
         let mut cov = vec![0.0; p * p];
+        self.add_sandwich(s, &beta, &inv, &mut cov);
+        let nb = self.blocks.len() as f64;
+        let corr = if nb > 1.0 { nb / (nb - 1.0) } else { 1.0 };
+        cov.iter_mut().for_each(|v| *v *= corr);
+        cov
+    }
+
+    /// Adds the plain sandwich `G⁻¹ (Σ_b ŝ_b ŝ_bᵀ) G⁻¹` over every block to `cov`
+    /// (`ŝ_b = b_b − G_b β`, the block's score at the fit `beta`; `inv` = `G⁻¹`).
+    fn add_sandwich(&self, s: &[usize], beta: &[f64], inv: &[f64], cov: &mut [f64]) {
+        let p = s.len();
         for blk in &self.blocks {
             let (gb, bb) = blk.sub(s);
             let sc: Vec<f64> = (0..p)
@@ -260,10 +258,6 @@ impl Bank {
                 }
             }
         }
-        let nb = self.blocks.len() as f64;
-        let corr = if nb > 1.0 { nb / (nb - 1.0) } else { 1.0 };
-        cov.iter_mut().for_each(|v| *v *= corr);
-        cov
     }
 
     /// Correlation of two columns after projecting out `base` (fit span).
