@@ -23,7 +23,8 @@
 //! `c24` given θ23, and what is left along `c23` is the instantaneous quadrature
 //! `−θ23 = ωxy² + γ′`. The left side inverts the identified sense dynamics (the sense mode
 //! alone is a ≈ 5 Hz low-pass, f/2Q): the rate's transfer is `F0` (two real poles at `wf`)
-//! times the lock-in low-pass; the price is noise, which grows with frequency as the
+//! times the output's second-order section ([`POST_HZ`], [`POST_ZETA`]) times the lock-in
+//! low-pass; the price is noise, which grows with frequency as the
 //! inverse of the sense dynamics (priced by the CRLB of `paragyro-sim rate-response`). The
 //! large terms are combined before filtering (`ω² + θ22` from the small precomputed
 //! `ω_ref² + θ22n`), as in [`crate::rows`], so `f32` keeps the precision.
@@ -124,10 +125,70 @@ impl<T: Real> Curvature<T> {
     }
 }
 
+/// Corner of the output's low-pass, Hz: a second-order section on the fast rate after the
+/// row's solution. With the wide filter's double real pole (`rate.svf_hz`) and the
+/// lock-in's Butterworth it makes the rate's roll-off steeper: less noise at the same
+/// bandwidth (README, "Rate channel"). A design constant, not in [`Config`]: as a
+/// validated configuration field the section did not fit the stm32f405's flash budget.
+pub const POST_HZ: f64 = 100.0;
+/// Damping ζ of the output's low-pass ([`POST_HZ`]).
+pub const POST_ZETA: f64 = 0.55;
+
+/// The output's second-order low-pass ([`POST_HZ`], [`POST_ZETA`]): the bilinear
+/// transform (not pre-warped) of `w²/(s² + 2ζ w s + w²)`,
+/// `y = g(x + 2x₁ + x₂) − a1 y₁ − a2 y₂` (unit DC gain).
+#[derive(Clone, Copy, Debug, Default)]
+struct PostCoeffs<T> {
+    g: T,
+    a1: T,
+    a2: T,
+}
+
+impl<T: Real> PostCoeffs<T> {
+    /// In `T` (on the chip the FPU's single precision, no soft-`f64`: flash).
+    fn of(hz: f64, zeta: f64, fs_hz: f64) -> Self {
+        let w = T::from_f64(2.0 * core::f64::consts::PI * hz);
+        let k = T::from_f64(2.0 * fs_hz);
+        let (w2, k2, c) = (w * w, k * k, T::from_f64(2.0) * T::from_f64(zeta) * w * k);
+        let inv = T::ONE / (k2 + c + w2);
+        PostCoeffs {
+            g: w2 * inv,
+            a1: T::from_f64(2.0) * (w2 - k2) * inv,
+            a2: (k2 - c + w2) * inv,
+        }
+    }
+}
+
+/// The state of [`PostCoeffs`]'s section (direct form I: the last two inputs, outputs).
+#[derive(Clone, Copy, Debug, Default)]
+struct PostState<T> {
+    x: [T; 2],
+    y: [T; 2],
+}
+
+impl<T: Real> PostState<T> {
+    /// At rest at `v` (DC gain 1).
+    fn at_rest(v: T) -> Self {
+        PostState {
+            x: [v, v],
+            y: [v, v],
+        }
+    }
+
+    fn update(&mut self, c: &PostCoeffs<T>, x: T) -> T {
+        let y = c.g * (x + self.x[0] + self.x[0] + self.x[1]) - c.a1 * self.y[0] - c.a2 * self.y[1];
+        self.x = [x, self.x[0]];
+        self.y = [y, self.y[0]];
+        y
+    }
+}
+
 /// The fast channel's design (built once from the configuration).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RateDesign<T> {
     svf: SvfCoeffs<T>,
+    /// The output's low-pass.
+    post: PostCoeffs<T>,
     /// The wide filter's curvature correction.
     bias: Curvature<T>,
     /// The narrow channel's filter (corner `rate.coupling_hz`).
@@ -174,6 +235,7 @@ impl<T: Real> RateDesign<T> {
         let lock = cfg.retune.lock_min_um / cfg.l0_um;
         RateDesign {
             svf: SvfCoeffs::new(wf, ts),
+            post: PostCoeffs::of(POST_HZ, POST_ZETA, cfg.fs_hz),
             bias: Curvature::of(parabola_bias::<T>(wf, ts)),
             svf_cpl: SvfCoeffs::new(wc, ts),
             th23_ref: T::from_f64(th2[2]),
@@ -339,6 +401,8 @@ pub struct RateState<T> {
     est: RateEstimate<T>,
     /// The narrow channel's last γ (its derivative is γ′).
     gamma_cpl: T,
+    /// The output low-pass on the wide channel's γ.
+    post: PostState<T>,
     /// The first solution has been made (the derivative starts from it).
     primed: bool,
     /// Slow mean of |A1|² over solved samples (the steadiness test).
@@ -483,6 +547,7 @@ impl<T: Real> RateState<T> {
         let prev = if self.primed { self.gamma_cpl } else { gamma_c };
         if !self.primed {
             self.amp2_slow = a2;
+            self.post = PostState::at_rest(gamma);
         }
         self.primed = true;
         let band = T::from_f64(DRIVE_STEADY2);
@@ -490,6 +555,7 @@ impl<T: Real> RateState<T> {
         self.amp2_slow += d.alpha_slow * (a2 - self.amp2_slow);
         self.est.steady = steady;
         self.gamma_cpl = gamma_c;
+        let gamma = self.post.update(&d.post, gamma);
         self.est.gamma = gamma;
         self.est.quad = -t23;
         self.est.gamma_slow += d.alpha_slow * (gamma - self.est.gamma_slow);
@@ -621,4 +687,34 @@ pub struct RateOutput {
     /// Valid: inputs valid, drive locked, slow estimate settled once and no change
     /// pending, row solvable, within full scale.
     pub valid: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The output section at rest stays at rest (unit DC gain), and a sine at its corner
+    /// comes out with the prototype's gain 1/(2ζ) (the bilinear transform moves the corner to
+    /// `fs/π·atan(π·POST_HZ/fs)`: the gain is checked there).
+    #[test]
+    fn the_output_section_has_unit_dc_gain_and_the_prototypes_peak_at_its_corner() {
+        let fs = 500.0;
+        let c = PostCoeffs::<f64>::of(POST_HZ, POST_ZETA, fs);
+        let mut s = PostState::at_rest(0.37);
+        for _ in 0..100 {
+            assert!((s.update(&c, 0.37) - 0.37).abs() < 1e-15);
+        }
+        let f = fs / core::f64::consts::PI * libm::atan(core::f64::consts::PI * POST_HZ / fs);
+        let w = 2.0 * core::f64::consts::PI * f / fs;
+        let mut s = PostState::at_rest(0.0);
+        let mut peak: f64 = 0.0;
+        for k in 0..4000 {
+            let y = s.update(&c, libm::sin(w * f64::from(k)));
+            if k >= 2000 {
+                peak = peak.max(y.abs());
+            }
+        }
+        let want = 1.0 / (2.0 * POST_ZETA);
+        assert!((peak - want).abs() < 0.01 * want, "{peak} against {want}");
+    }
 }

@@ -47,6 +47,9 @@ pub fn noise(o: &Options, bandwidth_hz: Option<f64>) -> Result<NoiseResult> {
         amp,
         mu_y,
         fc: cfg.rate.svf_hz,
+        post_hz: paragyro_core::rate::POST_HZ,
+        post_zeta: paragyro_core::rate::POST_ZETA,
+        fs: cfg.fs_hz,
         lpf_hz: cfg.lockin_lpf_hz,
         lpf_order: cfg.lockin_lpf_order as i32,
         nyquist: cfg.fs_hz / 2.0,
@@ -81,16 +84,23 @@ struct Bound {
     amp: f64,
     mu_y: f64,
     fc: f64,
+    post_hz: f64,
+    post_zeta: f64,
+    fs: f64,
     lpf_hz: f64,
     lpf_order: i32,
     nyquist: f64,
 }
 
 impl Bound {
-    /// |G| of the channel's design: F0 (double pole at fc) × Butterworth lock-in.
+    /// |G| of the channel's design: F0 (double pole at fc) × the output's section (its
+    /// bilinear transform: the analog prototype at `2fs·tan(πf/fs)`) × Butterworth
+    /// lock-in.
     fn design_gain(&self, f: f64) -> f64 {
         let x = f / self.fc;
-        1.0 / (1.0 + x * x) / (1.0 + (f / self.lpf_hz).powi(2 * self.lpf_order)).sqrt()
+        let xp = self.fs / PI * (PI * f / self.fs).tan() / self.post_hz;
+        let post = 1.0 / ((1.0 - xp * xp).powi(2) + (2.0 * self.post_zeta * xp).powi(2)).sqrt();
+        post / (1.0 + x * x) / (1.0 + (f / self.lpf_hz).powi(2 * self.lpf_order)).sqrt()
     }
 
     /// √∫₀^{fs/2} |G|² S_γ df in °/s.
