@@ -100,7 +100,7 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     let over = budget::tick_guard(s.instr_mean, s.instr_max);
     assert!(over.is_empty(), "{over:?}");
     // the re-linearisation is spread over ticks (core/src/estimator/relin.rs): the
-    // costliest tick is within 3 300 of the mean (measured 3 275 with the two DDS steps told
+    // costliest tick is within 3 300 of the mean (3 296 with the rate's output section; 3 275 with the two DDS steps told
     // to the core exactly: tick 1575, the settle edge and the retune's start on one tick,
     // 14 943; 2 432 before, 2 931 with the rate walk and the θ̂1, θ̂2 parts apart, 2 748
     // before the walk; 2 827 with the rate channel before the tick work, 2 615 before the
