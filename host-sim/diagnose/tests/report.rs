@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
+use paragyro_diagnose::diagnose::confirm::Run;
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
 use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT};
 use paragyro_diagnose::diagnose::{
@@ -141,9 +142,10 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
         num(),
         num(),
         any::<bool>(),
+        prop::collection::vec((num(), num(), num(), any::<bool>()), 1..4),
     )
         .prop_map(
-            |(effect, unexplained, unexplained_rows, residual_over_noise, nu2, confirmed)| {
+            |(effect, unexplained, unexplained_rows, residual_over_noise, nu2, confirmed, runs)| {
                 Confirmation {
                     effect,
                     unexplained,
@@ -151,6 +153,15 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                     residual_over_noise,
                     noise_energy_ratio: nu2,
                     confirmed,
+                    runs: runs
+                        .into_iter()
+                        .map(|(size, unexplained, residual_over_noise, passed)| Run {
+                            size,
+                            unexplained,
+                            residual_over_noise,
+                            passed,
+                        })
+                        .collect(),
                 }
             },
         )
