@@ -63,6 +63,9 @@ pub struct LoopNumbers {
     /// The scale factor and nonlinearity of the scenario's ramp leg (`rate-ramp`).
     #[serde(default)]
     pub ramp: Option<RampFit>,
+    /// The fast rate's error over the last [`ERR_SPAN_S`] (see [`RateError`]).
+    #[serde(default)]
+    pub rate_error: Option<RateError>,
     /// The fast rate of every sample, °/s (for `trace.csv`; not in `summary.json`).
     #[serde(skip)]
     pub rates: Vec<f64>,
@@ -166,6 +169,11 @@ pub struct Summary {
     /// leg (`rate-ramp`; the host-only loop's in `host_only.ramp`).
     #[serde(default)]
     pub ramp: Option<RampFit>,
+    /// The firmware's fast rate's error over the last [`ERR_SPAN_S`], and against the
+    /// host-only loop's sample by sample (the host-only loop's own in
+    /// `host_only.rate_error`).
+    #[serde(default)]
+    pub rate_error: Option<RateError>,
     /// The firmware's exit code (0: it ended the session cleanly).
     pub exit_code: Option<i32>,
     /// The host-only closed loop of the same scenario (f32 core, same configuration, the
@@ -276,6 +284,7 @@ pub fn host_only(
         rate_dps_mean_last_s: mean_last_s(&sc, rates.iter().map(|r| (r.0, r.2))),
         health_end,
         ramp,
+        rate_error: RateError::of(&sc, &rates, None),
         rates: rates.iter().map(|r| r.2).collect(),
     })
 }
@@ -293,6 +302,55 @@ fn leg_fit(
 }
 
 /// The mean of `(t, v)` over the scenario's last second.
+/// The span at the end over which [`RateError`] is read, s.
+pub const ERR_SPAN_S: f64 = 2.0;
+
+/// The fast rate's error over the last [`ERR_SPAN_S`] of a run whose true rate is constant
+/// there (`None` otherwise): its mean and rms about that mean against the truth, every
+/// sample (valid or not), and — for the firmware — the rms about its mean of its
+/// difference from the host-only loop's rate, sample by sample, which isolates what the
+/// firmware's path (its drivers, the chips' words, the DDS's steps) adds.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RateError {
+    /// Mean of estimate − truth, °/s.
+    pub mean_dps: f64,
+    /// Rms of estimate − truth about its mean, °/s.
+    pub rms_dps: f64,
+    /// Rms about its mean of the firmware's rate − the host-only loop's, °/s (firmware
+    /// only).
+    #[serde(default)]
+    pub vs_host_only_rms_dps: Option<f64>,
+}
+
+impl RateError {
+    /// From `(t, truth, estimate)` per sample and, for the firmware, the host-only loop's
+    /// estimate of the same samples.
+    fn of(sc: &Scenario, rows: &[(f64, f64, f64)], host: Option<&[f64]>) -> Option<Self> {
+        let from = sc.duration_s - ERR_SPAN_S;
+        let k0 = rows.iter().position(|r| r.0 >= from)?;
+        let span = &rows[k0..];
+        let truth = span.first()?.1;
+        if span.len() < 100 || span.iter().any(|r| r.1 != truth) {
+            return None;
+        }
+        let mean_rms = |v: &mut dyn Iterator<Item = f64>| {
+            let v: Vec<f64> = v.collect();
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            let r = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+            (m, r)
+        };
+        let (mean_dps, rms_dps) = mean_rms(&mut span.iter().map(|r| r.2 - r.1));
+        let vs_host_only_rms_dps = host
+            .filter(|h| h.len() == rows.len())
+            .map(|h| mean_rms(&mut span.iter().zip(&h[k0..]).map(|(r, h)| r.2 - h)).1);
+        Some(RateError {
+            mean_dps,
+            rms_dps,
+            vs_host_only_rms_dps,
+        })
+    }
+}
+
 fn mean_last_s(sc: &Scenario, rows: impl Iterator<Item = (f64, f64)>) -> f64 {
     let from = sc.duration_s - 1.0;
     let (n, sum) = rows
@@ -569,11 +627,50 @@ pub fn summarize(
         rate_dps_true: rate_true,
         health_end: s.rows.last().map_or(0, |r| r.fw.health),
         ramp,
+        rate_error: RateError::of(
+            sc,
+            &s.rows
+                .iter()
+                .map(|r| (r.t_s, r.rate_dps_true, r.fw.rate_dps))
+                .collect::<Vec<_>>(),
+            Some(&host.rates),
+        ),
         exit_code: s.exit_code,
         host_only: host,
         wy2_fil_vs_host: vs_host,
         wy2_fil_vs_host_tol: vs_host_tol,
         pass: failures.is_empty(),
         failures,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run whose last 2 s hold a constant truth gives the error's mean and rms and the
+    /// firmware's rms against the host-only loop's; a truth that moves there gives none.
+    #[test]
+    fn the_rate_error_is_read_over_a_constant_truth_only() {
+        let mut sc = Scenario::builtin("drift-retune").unwrap();
+        sc.duration_s = 4.0;
+        let rows: Vec<(f64, f64, f64)> = (0..2000)
+            .map(|k| {
+                let t = f64::from(k) * 0.002;
+                // ±0.3 alternating about an offset of 0.1
+                (t, 150.0, 150.1 + if k % 2 == 0 { 0.3 } else { -0.3 })
+            })
+            .collect();
+        let host: Vec<f64> = rows.iter().map(|r| r.2 - 0.05).collect();
+        let e = RateError::of(&sc, &rows, Some(&host)).unwrap();
+        assert!((e.mean_dps - 0.1).abs() < 1e-9, "{e:?}");
+        assert!((e.rms_dps - 0.3).abs() < 1e-9, "{e:?}");
+        assert!(e.vs_host_only_rms_dps.unwrap() < 1e-9, "{e:?}");
+        let mut moving = rows.clone();
+        moving[1500].1 = 151.0;
+        assert_eq!(RateError::of(&sc, &moving, None), None);
+        // a host-only trace of another length is not compared
+        let e = RateError::of(&sc, &rows, Some(&host[1..])).unwrap();
+        assert_eq!(e.vs_host_only_rms_dps, None);
     }
 }
