@@ -43,6 +43,10 @@ pub struct LoopScenario {
     pub expect: Expect,
     /// The leg of the rate whose scale factor and nonlinearity the verdict fits, if any.
     pub ramp: Option<RampLeg>,
+    /// The host-only loop's pump amplitude rounded to the board's DDS words
+    /// (`paragyro-fil --host-amplitude-words`, [`verdict::AsfWords`]): a measurement of
+    /// what those words cost the rate, not a check. Off in every scenario.
+    pub host_amplitude_words: bool,
 }
 
 /// A leg of the true rate over ±`full_scale_dps` (`rate-ramp`): the verdict fits its scale
@@ -74,6 +78,7 @@ pub fn drift_retune() -> anyhow::Result<LoopScenario> {
             out_of_band: false,
         },
         ramp: None,
+        host_amplitude_words: false,
     })
 }
 
@@ -227,7 +232,9 @@ pub fn run(
         work_dir: out.to_path_buf(),
     };
     let (fil, host) = std::thread::scope(|s| {
-        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, pump, ls.ramp));
+        let host = s.spawn(|| {
+            verdict::host_only(&ls.scenario, seed, pump, ls.ramp, ls.host_amplitude_words)
+        });
         let fil = session::run(&opts);
         (fil, host.join())
     });

@@ -37,6 +37,11 @@ struct Cli {
     /// Use this `fil` image instead of building one.
     #[arg(long)]
     elf: Option<PathBuf>,
+    /// Round the host-only loop's pump amplitude to the AD9959's 10-bit words, as the
+    /// board's are (`summary.json` `rate_error` then shows what those words cost the rate;
+    /// a measurement: the verdict's comparisons with the host-only loop assume it off).
+    #[arg(long)]
+    host_amplitude_words: bool,
 }
 
 fn main() -> ExitCode {
@@ -96,7 +101,8 @@ fn run() -> anyhow::Result<bool> {
         return budget(&args[1..]);
     }
     let cli = Cli::parse();
-    let ls = paragyro_fil::by_name(&cli.scenario)?;
+    let mut ls = paragyro_fil::by_name(&cli.scenario)?;
+    ls.host_amplitude_words = cli.host_amplitude_words;
     let out = cli.out.unwrap_or_else(|| {
         let d = paragyro_fil::default_out();
         if ls.name == "drift-retune" {

@@ -239,6 +239,7 @@ pub fn host_only(
     seed: u64,
     pump: BoardPump,
     leg: Option<RampLeg>,
+    amplitude_words: bool,
 ) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
     sc.sim.pump_profile = pump.sim_profile();
@@ -253,10 +254,16 @@ pub fn host_only(
     let mut health_end = 0;
     let mut wy2_true = f64::NAN;
     let mut rates = Vec::new();
-    runner::closed_loop(
+    let mut words = AsfWords {
+        full_scale: f64::from(paragyro_firmware::run::AMPLITUDE.full_scale),
+        on: amplitude_words,
+    };
+    runner::closed_loop_hooked(
         &sc,
         seed,
+        &runner::Device::default(),
         &mut est,
+        &mut words,
         |_| {},
         |ls| {
             amp.push((ls.t_s, ls.lockin.y_abs(1)));
@@ -302,6 +309,46 @@ fn leg_fit(
 }
 
 /// The mean of `(t, v)` over the scenario's last second.
+/// The host-only loop's pump amplitude as the board's DDS makes it (when `on`): the
+/// core's multiplier `m` of the scenario's pump scale becomes the AD9959's amplitude word,
+/// `ASF = round(1023·√(m/full_scale))` (the force goes with the voltage squared, as
+/// `ad9959::AmplitudeWord::from_scale`), and the plant and the next sample take
+/// `(ASF/1023)²·full_scale`: one word is 0.24 % of the scale at `m` = 1. The frequency
+/// keeps the core's unquantised commands.
+pub struct AsfWords {
+    /// `paragyro_firmware::run::AMPLITUDE.full_scale`.
+    pub full_scale: f64,
+    /// Round (else the hooks change nothing).
+    pub on: bool,
+}
+
+impl AsfWords {
+    /// The multiplier `m` as the words give it.
+    pub fn round(&self, m: f64) -> f64 {
+        let asf = (1023.0 * (m.max(0.0) / self.full_scale).sqrt())
+            .round()
+            .min(1023.0);
+        (asf / 1023.0).powi(2) * self.full_scale
+    }
+}
+
+impl runner::LoopHooks<f32> for AsfWords {
+    fn inputs(
+        &mut self,
+        _k: u64,
+        _u0: &mut paragyro_simulator::plant::PlantInputs,
+        u1: &mut paragyro_simulator::plant::PlantInputs,
+        next: &mut (f64, f64),
+    ) {
+        if !self.on || next.1 <= 0.0 {
+            return;
+        }
+        let m = self.round(next.1);
+        u1.s *= m / next.1;
+        next.1 = m;
+    }
+}
+
 /// The span at the end over which [`RateError`] is read, s.
 pub const ERR_SPAN_S: f64 = 2.0;
 
@@ -647,6 +694,26 @@ pub fn summarize(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The host-only loop's amplitude words are the AD9959's: the word of the multiplier,
+    /// squared and scaled back; m = 1 is word 818 (0.8·1023 = 818.4), 0.1 % low.
+    #[test]
+    fn the_host_only_amplitude_words_are_the_dds_words() {
+        let w = AsfWords {
+            full_scale: f64::from(paragyro_firmware::run::AMPLITUDE.full_scale),
+            on: true,
+        };
+        let want = (818.0f64 / 1023.0).powi(2) * 1.5625;
+        assert!((w.round(1.0) - want).abs() < 1e-15);
+        for m in [0.3, 0.9, 1.0, 1.07, 1.1] {
+            let word = paragyro_firmware::drivers::ad9959::AmplitudeWord::from_scale(
+                (m / w.full_scale) as f32,
+            );
+            let dds = f64::from(word.get()) / 1023.0;
+            assert!((w.round(m) - dds * dds * w.full_scale).abs() < 1e-12, "{m}");
+        }
+        assert_eq!(w.round(9.0), w.full_scale);
+    }
 
     /// A run whose last 2 s hold a constant truth gives the error's mean and rms and the
     /// firmware's rms against the host-only loop's; a truth that moves there gives none.
