@@ -43,10 +43,11 @@ pub struct LoopScenario {
     pub expect: Expect,
     /// The leg of the rate whose scale factor and nonlinearity the verdict fits, if any.
     pub ramp: Option<RampLeg>,
-    /// The host-only loop's pump amplitude rounded to the board's DDS words
-    /// (`paragyro-fil --host-amplitude-words`, [`verdict::AsfWords`]): a measurement of
-    /// what those words cost the rate, not a check. Off in every scenario.
-    pub host_amplitude_words: bool,
+    /// The host-only loop's pump rounded to the board's DDS words
+    /// (`paragyro-fil --host-amplitude-words`, `--host-frequency-words`,
+    /// [`verdict::BoardWords`]): a measurement of what those words cost the rate, not a
+    /// check. Off in every scenario.
+    pub host_words: verdict::HostWords,
 }
 
 /// A leg of the true rate over ±`full_scale_dps` (`rate-ramp`): the verdict fits its scale
@@ -78,7 +79,7 @@ pub fn drift_retune() -> anyhow::Result<LoopScenario> {
             out_of_band: false,
         },
         ramp: None,
-        host_amplitude_words: false,
+        host_words: verdict::HostWords::default(),
     })
 }
 
@@ -232,9 +233,7 @@ pub fn run(
         work_dir: out.to_path_buf(),
     };
     let (fil, host) = std::thread::scope(|s| {
-        let host = s.spawn(|| {
-            verdict::host_only(&ls.scenario, seed, pump, ls.ramp, ls.host_amplitude_words)
-        });
+        let host = s.spawn(|| verdict::host_only(&ls.scenario, seed, pump, ls.ramp, ls.host_words));
         let fil = session::run(&opts);
         (fil, host.join())
     });

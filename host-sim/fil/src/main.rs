@@ -42,6 +42,12 @@ struct Cli {
     /// a measurement: the verdict's comparisons with the host-only loop assume it off).
     #[arg(long)]
     host_amplitude_words: bool,
+    /// Round the host-only loop's pump frequency to the AD9959's words as the board does
+    /// with two steps per sample (whole words with error feedback, the core told the sweep
+    /// whose half means they are); `--pump half-steps` only. A measurement, as
+    /// `--host-amplitude-words`.
+    #[arg(long)]
+    host_frequency_words: bool,
 }
 
 fn main() -> ExitCode {
@@ -102,7 +108,13 @@ fn run() -> anyhow::Result<bool> {
     }
     let cli = Cli::parse();
     let mut ls = paragyro_fil::by_name(&cli.scenario)?;
-    ls.host_amplitude_words = cli.host_amplitude_words;
+    ls.host_words = paragyro_fil::verdict::HostWords {
+        amplitude: cli.host_amplitude_words,
+        frequency: cli.host_frequency_words,
+    };
+    if ls.host_words.frequency && !matches!(cli.pump, Pump::HalfSteps) {
+        anyhow::bail!("--host-frequency-words needs --pump half-steps (the board's two steps)");
+    }
     let out = cli.out.unwrap_or_else(|| {
         let d = paragyro_fil::default_out();
         if ls.name == "drift-retune" {

@@ -239,7 +239,7 @@ pub fn host_only(
     seed: u64,
     pump: BoardPump,
     leg: Option<RampLeg>,
-    amplitude_words: bool,
+    words: HostWords,
 ) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
     sc.sim.pump_profile = pump.sim_profile();
@@ -254,10 +254,7 @@ pub fn host_only(
     let mut health_end = 0;
     let mut wy2_true = f64::NAN;
     let mut rates = Vec::new();
-    let mut words = AsfWords {
-        full_scale: f64::from(paragyro_firmware::run::AMPLITUDE.full_scale),
-        on: amplitude_words,
-    };
+    let mut words = BoardWords::new(words, pump);
     runner::closed_loop_hooked(
         &sc,
         seed,
@@ -309,43 +306,104 @@ fn leg_fit(
 }
 
 /// The mean of `(t, v)` over the scenario's last second.
-/// The host-only loop's pump amplitude as the board's DDS makes it (when `on`): the
-/// core's multiplier `m` of the scenario's pump scale becomes the AD9959's amplitude word,
-/// `ASF = round(1023·√(m/full_scale))` (the force goes with the voltage squared, as
-/// `ad9959::AmplitudeWord::from_scale`), and the plant and the next sample take
-/// `(ASF/1023)²·full_scale`: one word is 0.24 % of the scale at `m` = 1. The frequency
-/// keeps the core's unquantised commands.
-pub struct AsfWords {
-    /// `paragyro_firmware::run::AMPLITUDE.full_scale`.
-    pub full_scale: f64,
-    /// Round (else the hooks change nothing).
-    pub on: bool,
+/// Which of the board's DDS words the host-only loop's pump takes ([`BoardWords`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct HostWords {
+    /// The amplitude's 10-bit words.
+    pub amplitude: bool,
+    /// The frequency's words, two steps per sample with error feedback.
+    pub frequency: bool,
 }
 
-impl AsfWords {
-    /// The multiplier `m` as the words give it.
-    pub fn round(&self, m: f64) -> f64 {
-        let asf = (1023.0 * (m.max(0.0) / self.full_scale).sqrt())
-            .round()
-            .min(1023.0);
-        (asf / 1023.0).powi(2) * self.full_scale
+/// The host-only loop's pump as the board's DDS makes it ([`HostWords`]; hooks that change
+/// nothing when both are off).
+///
+/// * Amplitude: the core's multiplier `m` of the scenario's pump scale becomes the
+///   AD9959's amplitude word, `ASF = round(1023·√(m/full_scale))` (the force goes with the
+///   voltage squared, as `ad9959::AmplitudeWord::from_scale`), and the plant and the next
+///   sample take `(ASF/1023)²·full_scale`: one word is 0.24 % of the scale at `m` = 1.
+/// * Frequency (two steps per sample): the command's reference word and the two steps
+///   towards it from the last command's, whole words with error feedback
+///   (`paragyro_firmware::app::half_steps`, the board's function); the plant steps to them
+///   (the simulator's half steps are the quarter points of its interval, so the interval
+///   runs over the sweep whose half means they are, (3a − b)/2 → (3b − a)/2 words), the
+///   next sample reports that sweep's end and the core is told its move, 2(b − a) words
+///   (`Estimator::set_pump_sweep_hz`), as the board's `App::tell_steps`.
+pub struct BoardWords {
+    amplitude_full_scale: Option<f64>,
+    /// Hz per reference word (`paragyro_firmware::run::pump_step_hz`), with the words.
+    frequency_hz_per_word: Option<f64>,
+    node: Option<i32>,
+    residual: i32,
+    sweep_hz: Option<f64>,
+}
+
+impl BoardWords {
+    /// The hooks for `words` (the frequency's only with the board's two steps).
+    pub fn new(words: HostWords, pump: BoardPump) -> Self {
+        BoardWords {
+            amplitude_full_scale: words
+                .amplitude
+                .then(|| f64::from(paragyro_firmware::run::AMPLITUDE.full_scale)),
+            frequency_hz_per_word: (words.frequency && pump == BoardPump::HalfSteps)
+                .then(paragyro_firmware::run::pump_step_hz),
+            node: None,
+            residual: 0,
+            sweep_hz: None,
+        }
+    }
+
+    /// The multiplier `m` as the amplitude words give it (`m` itself without them).
+    pub fn round_amplitude(&self, m: f64) -> f64 {
+        let Some(full) = self.amplitude_full_scale else {
+            return m;
+        };
+        let asf = (1023.0 * (m.max(0.0) / full).sqrt()).round().min(1023.0);
+        (asf / 1023.0).powi(2) * full
     }
 }
 
-impl runner::LoopHooks<f32> for AsfWords {
+impl runner::LoopHooks<f32> for BoardWords {
+    fn step(
+        &mut self,
+        _k: u64,
+        est: &mut Estimator<f32>,
+        sample: &mut paragyro_core::Sample<f32>,
+        _last: &paragyro_core::StepOutput,
+    ) -> paragyro_core::StepOutput {
+        if let Some(sweep) = self.sweep_hz.take() {
+            est.set_pump_sweep_hz(sweep as f32);
+        }
+        est.step(sample)
+    }
+
     fn inputs(
         &mut self,
         _k: u64,
-        _u0: &mut paragyro_simulator::plant::PlantInputs,
+        u0: &mut paragyro_simulator::plant::PlantInputs,
         u1: &mut paragyro_simulator::plant::PlantInputs,
         next: &mut (f64, f64),
     ) {
-        if !self.on || next.1 <= 0.0 {
-            return;
+        if self.amplitude_full_scale.is_some() && next.1 > 0.0 {
+            let m = self.round_amplitude(next.1);
+            u1.s *= m / next.1;
+            next.1 = m;
         }
-        let m = self.round(next.1);
-        u1.s *= m / next.1;
-        next.1 = m;
+        if let Some(hpw) = self.frequency_hz_per_word
+            && next.0 > 0.0
+        {
+            let per_hz = u1.omega / next.0;
+            let c = (next.0 / hpw).round() as i32;
+            let node = self.node.unwrap_or(c);
+            let (a, b, residual) = paragyro_firmware::app::half_steps(node, c, self.residual);
+            let (a, b) = (f64::from(a), f64::from(b));
+            u0.omega = 0.5 * (3.0 * a - b) * hpw * per_hz;
+            u1.omega = 0.5 * (3.0 * b - a) * hpw * per_hz;
+            next.0 = 0.5 * (3.0 * b - a) * hpw;
+            self.sweep_hz = Some(2.0 * (b - a) * hpw);
+            self.node = Some(c);
+            self.residual = residual;
+        }
     }
 }
 
@@ -699,20 +757,69 @@ mod tests {
     /// squared and scaled back; m = 1 is word 818 (0.8·1023 = 818.4), 0.1 % low.
     #[test]
     fn the_host_only_amplitude_words_are_the_dds_words() {
-        let w = AsfWords {
-            full_scale: f64::from(paragyro_firmware::run::AMPLITUDE.full_scale),
-            on: true,
+        let words = HostWords {
+            amplitude: true,
+            frequency: false,
         };
+        let w = BoardWords::new(words, BoardPump::HalfSteps);
+        let full = f64::from(paragyro_firmware::run::AMPLITUDE.full_scale);
         let want = (818.0f64 / 1023.0).powi(2) * 1.5625;
-        assert!((w.round(1.0) - want).abs() < 1e-15);
+        assert!((w.round_amplitude(1.0) - want).abs() < 1e-15);
         for m in [0.3, 0.9, 1.0, 1.07, 1.1] {
-            let word = paragyro_firmware::drivers::ad9959::AmplitudeWord::from_scale(
-                (m / w.full_scale) as f32,
-            );
+            let word =
+                paragyro_firmware::drivers::ad9959::AmplitudeWord::from_scale((m / full) as f32);
             let dds = f64::from(word.get()) / 1023.0;
-            assert!((w.round(m) - dds * dds * w.full_scale).abs() < 1e-12, "{m}");
+            assert!(
+                (w.round_amplitude(m) - dds * dds * full).abs() < 1e-12,
+                "{m}"
+            );
         }
-        assert_eq!(w.round(9.0), w.full_scale);
+        assert_eq!(w.round_amplitude(9.0), full);
+        let off = BoardWords::new(HostWords::default(), BoardPump::HalfSteps);
+        assert_eq!(off.round_amplitude(1.0), 1.0);
+    }
+
+    /// With the frequency words the plant's two steps are the board's whole words and the
+    /// next sample reports the end of the sweep whose half means they are, near the
+    /// command.
+    #[test]
+    fn the_host_only_frequency_words_step_as_the_boards() {
+        use paragyro_simulator::plant::PlantInputs;
+        use runner::LoopHooks;
+        let words = HostWords {
+            amplitude: false,
+            frequency: true,
+        };
+        let mut w = BoardWords::new(words, BoardPump::HalfSteps);
+        let hpw = paragyro_firmware::run::pump_step_hz();
+        let f0 = 10_960.0;
+        let mut next = (0.0, 1.0);
+        let mk = |hz: f64| PlantInputs {
+            omega: hz / (2.0 * f0),
+            s: 1.0,
+            ax: 0.0,
+            ay: 0.0,
+        };
+        for k in 0..50u32 {
+            let cmd = 21_900.0 + 0.3 * hpw + f64::from(k) * 1.7 * hpw;
+            next.0 = cmd;
+            let (mut u0, mut u1) = (mk(cmd), mk(cmd));
+            LoopHooks::<f32>::inputs(&mut w, u64::from(k), &mut u0, &mut u1, &mut next);
+            // the quarter points are whole words
+            for q in [0.25, 0.75] {
+                let step = (u0.omega + (u1.omega - u0.omega) * q) * 2.0 * f0 / hpw;
+                assert!((step - step.round()).abs() < 1e-6, "{k}: {step}");
+            }
+            assert!((next.0 - u1.omega * 2.0 * f0).abs() < 1e-6);
+            assert!(
+                (next.0 - cmd).abs() < 2.0 * hpw,
+                "{k}: {} for {cmd}",
+                next.0
+            );
+        }
+        assert!(w.sweep_hz.is_some());
+        let off = BoardWords::new(words, BoardPump::Staircase);
+        assert!(off.frequency_hz_per_word.is_none());
     }
 
     /// A run whose last 2 s hold a constant truth gives the error's mean and rms and the
