@@ -306,5 +306,8 @@ fn the_dds_words_are_what_the_firmware_path_adds_to_the_rate() {
     );
     let apart = e.vs_host_only_rms_dps.expect("the same ticks");
     assert!(apart < 0.05, "{e:?} against {h:?}");
-    assert!((e.mean_dps - h.mean_dps).abs() < 0.05, "{e:?} against {h:?}");
+    assert!(
+        (e.mean_dps - h.mean_dps).abs() < 0.05,
+        "{e:?} against {h:?}"
+    );
 }
