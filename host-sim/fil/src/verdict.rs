@@ -2,6 +2,7 @@
 //! the same scenario it is compared with.
 
 use paragyro_core::Estimator;
+use paragyro_firmware::drivers::ad9959::AmplitudeWord;
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::rate_response::{RampFit, ramp_fit};
 use paragyro_simulator::runner;
@@ -305,7 +306,6 @@ fn leg_fit(
     Ok(Some(ramp_fit(on_leg, leg.full_scale_dps)?))
 }
 
-/// The mean of `(t, v)` over the scenario's last second.
 /// Which of the board's DDS words the host-only loop's pump takes ([`BoardWords`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct HostWords {
@@ -320,7 +320,7 @@ pub struct HostWords {
 ///
 /// * Amplitude: the core's multiplier `m` of the scenario's pump scale becomes the
 ///   AD9959's amplitude word, `ASF = round(1023·√(m/full_scale))` (the force goes with the
-///   voltage squared, as `ad9959::AmplitudeWord::from_scale`), and the plant and the next
+///   voltage squared; the board's own `ad9959::AmplitudeWord::from_scale`), and the plant and the next
 ///   sample take `(ASF/1023)²·full_scale`: one word is 0.24 % of the scale at `m` = 1.
 /// * Frequency (two steps per sample): the command's reference word and the two steps
 ///   towards it from the last command's, whole words with error feedback
@@ -358,8 +358,9 @@ impl BoardWords {
         let Some(full) = self.amplitude_full_scale else {
             return m;
         };
-        let asf = (1023.0 * (m.max(0.0) / full).sqrt()).round().min(1023.0);
-        (asf / 1023.0).powi(2) * full
+        // the board's own word for the scale `m/full_scale`
+        let word = AmplitudeWord::from_scale((m / full) as f32);
+        (f64::from(word.get()) / 1023.0).powi(2) * full
     }
 }
 
@@ -456,6 +457,7 @@ impl RateError {
     }
 }
 
+/// The mean of `(t, v)` over the scenario's last second.
 fn mean_last_s(sc: &Scenario, rows: impl Iterator<Item = (f64, f64)>) -> f64 {
     let from = sc.duration_s - 1.0;
     let (n, sum) = rows
