@@ -45,8 +45,8 @@
 //! AD9959's serial port may also need its SYNC_IO pin; that belongs to the board.
 //!
 //! **Two steps per sample ([`App::set_half_steps`], the stm32f405 and `fil` boards).** The
-//! DDS steps its frequency at IO_UPDATE (to a word quantised to 2·f_SYSCLK/2³² ≈ 0.233 Hz
-//! at 500 MHz), while the core's replica of the lock-in low-pass for the frequency is
+//! DDS steps its frequency at IO_UPDATE (to a word quantised to 2·f_SYSCLK/2³² ≈ 0.058 Hz
+//! at the board's 125 MHz), while the core's replica of the lock-in low-pass for the frequency is
 //! first-order-hold exact: it assumes the pump sweeps *linearly* from one sample's value
 //! to the next ([`paragyro_core::lpf`]). One step per sample with the core's ZOH replica
 //! (`PumpProfile::Staircase`) costs a rate bias of +1.2 % on `identify` (README "Pump
@@ -60,7 +60,7 @@
 //! the sweep whose half means they are, and that sweep's move goes to
 //! [`Estimator::set_pump_sweep_hz`] (the replica then holds what the DDS does). Telling
 //! one value per sample cannot do that: steps that are *exactly* the half means of a
-//! sweep between told nodes confine the told pump to a grid of four words (0.93 Hz),
+//! sweep between told nodes confine the told pump to a grid of four words (0.93 Hz at 500 MHz),
 //! which biased the rate by ≈ +0.1 % against the host-only loop (`drift-retune`); the
 //! command's word told with the rounded steps (7f07a93) left the replica a slope one word
 //! off on every tie of the rounding, which the rate row read as a rate offset that kept
@@ -69,8 +69,8 @@
 //! steps could not be exact means (the amplitude steps are below one word a tick). Not
 //! modelled in the loop: the first pulse's delay after DRDY (the tick's length, ≈ 0.1 ms). The
 //! AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, delta words and ramp
-//! rate) cannot replace the steps: its 8-bit ramp rate (≤ 2.04 µs per step) and 0.116 Hz
-//! delta resolution make its slowest sweep ≈ 57 kHz/s, far above the core's ≈ 680 Hz/s:
+//! rate) cannot replace the steps: its 8-bit ramp rate (≤ 8.16 µs per step at 125 MHz) and
+//! 0.029 Hz delta resolution make its slowest sweep ≈ 3.6 kHz/s, far above the core's ≈ 680 Hz/s:
 //! it would reach each word within ≈ 25 µs and hold (a staircase again).
 //!
 //! **The guard.** The core keeps the pump inside the drive's parametric band by itself
@@ -117,9 +117,10 @@ impl<F: FnMut()> IoUpdate for F {
 }
 
 /// IO_UPDATE on an [`embedded_hal::digital::OutputPin`]: high, then low. The AD9959 needs
-/// the pulse high for at least one SYNC_CLK period (8 ns at 500 MHz SYSCLK), which two
-/// back-to-back GPIO writes of a Cortex-M4 exceed. Pin errors are ignored (GPIO writes
-/// are infallible on the STM32F4).
+/// the pulse high for at least one SYNC_CLK period (SYSCLK/4: 8 ns at 500 MHz), which two
+/// back-to-back GPIO writes of a 168 MHz Cortex-M4 exceed; at the board's 125 MHz (32 ns)
+/// they do not, and the stm32f405 board holds the pin for a set number of cycles instead.
+/// Pin errors are ignored (GPIO writes are infallible on the STM32F4).
 #[derive(Debug)]
 pub struct PinIoUpdate<P>(pub P);
 

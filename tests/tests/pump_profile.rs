@@ -247,8 +247,9 @@ impl LoopHooks<f32> for DdsWords {
 
 #[test]
 fn the_dds_whole_words_keep_the_scale_factor_of_the_exact_steps() {
-    // The firmware's words against the unquantised steps, paired by seed (1–10). Steps
-    // that were exact half means of a sweep between told nodes moved the told pump in
+    // The firmware's words against the unquantised steps, paired by seed (1–10). At the
+    // board's 125 MHz SYSCLK (a 0.058 Hz pump word): +0.006 % here. At 500 MHz (0.233 Hz),
+    // steps that were exact half means of a sweep between told nodes moved the told pump in
     // multiples of four words (0.93 Hz): +0.099 % here (+0.082 % in the firmware in the
     // loop, its ADC and accelerometer included); the told command word with the steps
     // rounded under error feedback: −0.025 % here, −0.016 % in the loop.
@@ -287,7 +288,9 @@ fn rate_step_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> (usize, bool, f6
 fn the_dds_whole_words_let_the_slow_rls_take_a_rate_step_as_the_exact_steps_do() {
     // After the step the narrow channel's rate must stay still for a gate's length before
     // the slow RLS takes it and its gate ends (core/src/rate.rs). The exact steps: 806–824
-    // gated ticks of 1 501 (seeds 1–5). The told command word with the steps' rounding
+    // gated ticks of 1 501 (seeds 1–5); the board's words (125 MHz SYSCLK) 806–824, the
+    // rate at the last tick +0.010 to +0.024 °/s off the exact steps'. At 500 MHz, the told
+    // command word with the steps' rounding
     // errors fed back (7f07a93) made the pump's slope within the interval ½ word smaller
     // than the told sweep's on every tie: 834–1 499 gated ticks, gated to the end on seed
     // 1, the rate at the last tick 1.07–1.11 °/s below the exact steps' on every seed.
@@ -313,4 +316,45 @@ fn the_dds_whole_words_let_the_slow_rls_take_a_rate_step_as_the_exact_steps_do()
         mean.abs() < 0.5,
         "the rate at the end {mean:+.3} °/s off the exact steps' on average ({dr:?})"
     );
+}
+
+/// The rms about its mean of `a − b` over the last [`paragyro_fil::verdict::ERR_SPAN_S`].
+fn rms_apart_at_the_end(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let n = (paragyro_fil::verdict::ERR_SPAN_S * 500.0) as usize;
+    let d: Vec<f64> = a[a.len() - n..]
+        .iter()
+        .zip(&b[b.len() - n..])
+        .map(|(x, y)| x - y)
+        .collect();
+    let m = d.iter().sum::<f64>() / d.len() as f64;
+    (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+}
+
+/// The board's DDS clock is chosen for the rate: each step of the pump's frequency kicks the
+/// drive's ≈ 100 Hz envelope mode, which the fast rate channel reads. On `rate-step`, seed
+/// 1, the host-only loop with the board's frequency words (125 MHz SYSCLK, a 0.058 Hz pump
+/// word) reads within 0.06 °/s rms of its unrounded twin (0.037–0.040 on seeds 1–3 with
+/// `cargo run --release -p paragyro-fil --example dds_words`), where the 0.233 Hz words of a
+/// 500 MHz SYSCLK, the board's before, add more than 0.1 (0.125–0.126).
+#[test]
+fn the_boards_dds_clock_keeps_the_frequency_words_out_of_the_rate() {
+    use paragyro_fil::session::BoardPump;
+    use paragyro_fil::verdict::{WordGrid, host_only_on};
+    let ls = paragyro_fil::rate_step().unwrap();
+    let run = |sysclk: Option<f64>| {
+        let grid = WordGrid {
+            amplitude_bits: None,
+            frequency_sysclk_hz: sysclk,
+        };
+        host_only_on(&ls.scenario, 1, BoardPump::HalfSteps, None, grid)
+            .unwrap()
+            .rates
+    };
+    let exact = run(None);
+    assert_eq!(DEFAULT_SYSCLK_HZ, 125e6);
+    let board = rms_apart_at_the_end(&run(Some(DEFAULT_SYSCLK_HZ)), &exact);
+    let old = rms_apart_at_the_end(&run(Some(500e6)), &exact);
+    assert!(board < 0.06, "the board's words: {board} deg/s rms");
+    assert!(old > 0.1, "a 500 MHz SYSCLK's words: {old} deg/s rms");
 }

@@ -6,7 +6,7 @@
 //! | ADS131M08, sense axis (Y0, B1..B3) | SPI1 (shared) | CS PC4 |
 //! | both ADCs' DRDY (one CLKIN, simultaneous conversions) | | PB0 (input, active low) |
 //! | ADXL355 | SPI2, mode 0, 5 MHz | SCK PB13, MISO PB14, MOSI PB15, CS PB12 |
-//! | AD9959 (25 MHz reference, PLL ×20 = 500 MHz) | SPI3, mode 0, 10 MHz | SCK PC10, SDIO_2 → MISO PC11, SDIO_0 ← MOSI PC12, CS PA15 |
+//! | AD9959 (25 MHz reference, PLL ×5 = 125 MHz) | SPI3, mode 0, 10 MHz | SCK PC10, SDIO_2 → MISO PC11, SDIO_0 ← MOSI PC12, CS PA15 |
 //! | AD9959 IO_UPDATE | | PB1 (output) |
 //!
 //! The pin map is this firmware's; a PCB that differs changes this table and the code
@@ -43,7 +43,7 @@ use embedded_hal::spi::SpiDevice;
 use embedded_hal_bus::spi::{AtomicDevice, ExclusiveDevice};
 use embedded_hal_bus::util::AtomicCell;
 use paragyro_core::Config;
-use paragyro_firmware::app::{App, Chips, IoUpdate, PinIoUpdate, PumpAmplitude, PumpGuard};
+use paragyro_firmware::app::{App, Chips, IoUpdate, PumpAmplitude, PumpGuard};
 use paragyro_firmware::drivers::ad9959::Ad9959;
 use paragyro_firmware::drivers::ads131m08::{self, Ads131m08};
 use paragyro_firmware::drivers::adxl355::{Adxl355, HighPass, Odr, Range};
@@ -55,9 +55,9 @@ use stm32f4xx_hal::spi::{Mode, Phase, Polarity, Spi};
 
 /// Core clock, Hz.
 const SYSCLK_HZ: u32 = 168_000_000;
-/// The AD9959's reference clock and PLL multiplier (SYSCLK 500 MHz).
+/// The AD9959's reference clock and PLL multiplier (SYSCLK 125 MHz, `DEFAULT_SYSCLK_HZ`).
 const DDS_REF_HZ: f64 = 25e6;
-const DDS_PLL: u8 = 20;
+const DDS_PLL: u8 = 5;
 /// Drive-axis lock-in scale, µm per volt at the ADC input (design value).
 pub const CAL_X_UM_PER_VOLT: f32 = 8.0;
 /// Sense-axis lock-in scale, µm per volt at the ADC input (design value).
@@ -69,10 +69,26 @@ const DRDY_TIMEOUT_CYCLES: u32 = SYSCLK_HZ / 250;
 /// Half a 500 Hz sample period in core cycles: the second IO_UPDATE of the two DDS steps.
 const HALF_PERIOD_CYCLES: u32 = SYSCLK_HZ / 1000;
 
+/// IO_UPDATE's high time, core cycles: the AD9959 takes the pulse on SYNC_CLK (SYSCLK/4,
+/// 32 ns at the board's 125 MHz), longer than two back-to-back GPIO writes; 12 cycles at
+/// 168 MHz are 71 ns.
+const IO_UPDATE_HOLD_CYCLES: u32 = 12;
+
 /// IO_UPDATE now, or armed for the main loop to pulse half a period after the tick began.
 struct HalfPeriodIo<P> {
-    pin: PinIoUpdate<P>,
+    pin: P,
     armed: bool,
+}
+
+impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
+    /// One pulse, held high [`IO_UPDATE_HOLD_CYCLES`] (pin errors ignored: GPIO writes are
+    /// infallible on the STM32F4).
+    #[inline(never)] // two callers, one copy (flash)
+    fn pulse_held(&mut self) {
+        let _ = self.pin.set_high();
+        cortex_m::asm::delay(IO_UPDATE_HOLD_CYCLES);
+        let _ = self.pin.set_low();
+    }
 }
 
 impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
@@ -82,7 +98,7 @@ impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
     fn finish_period(&mut self, c0: u32) {
         if core::mem::take(&mut self.armed) {
             while DWT::cycle_count().wrapping_sub(c0) < HALF_PERIOD_CYCLES {}
-            self.pin.pulse();
+            self.pulse_held();
         }
     }
 }
@@ -100,7 +116,7 @@ fn board_config() -> Config {
 
 impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
     fn pulse(&mut self) {
-        self.pin.pulse();
+        self.pulse_held();
     }
 
     fn pulse_at_half_period(&mut self) -> bool {
@@ -351,7 +367,7 @@ fn main() -> ! {
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
-    let (pin, armed) = (PinIoUpdate(gpiob.pb1.into_push_pull_output()), false);
+    let (pin, armed) = (gpiob.pb1.into_push_pull_output(), false);
     let mut io = HalfPeriodIo { pin, armed };
 
     let mut delay = CycleDelay;

@@ -2,8 +2,8 @@
 //!
 //! # Design
 //!
-//! One AD9959 makes the pump and the lock-in references from one SYSCLK (default
-//! 500 MHz): channel 0 the pump at 2Ω (≈ 21.9 kHz), channel 1 the reference at Ω,
+//! One AD9959 makes the pump and the lock-in references from one SYSCLK (the board's
+//! 125 MHz, [`DEFAULT_SYSCLK_HZ`]): channel 0 the pump at 2Ω (≈ 21.9 kHz), channel 1 the reference at Ω,
 //! channel 2 the reference at 3Ω, channel 3 spare ([`Channel::PUMP`] …).
 //!
 //! **Serial port.** Every register access is one [`SpiDevice`] transaction: an
@@ -31,7 +31,7 @@
 //! accumulators together ([`Ad9959::begin_phase_alignment`] / [`Ad9959::end_phase_alignment`]).
 //!
 //! **Words.** `FTW = round(f · 2^32 / f_SYSCLK)` and the realised frequency is the exact
-//! inverse `FTW · f_SYSCLK / 2^32` (resolution 0.116 Hz at 500 MHz), returned in `f64` so
+//! inverse `FTW · f_SYSCLK / 2^32` (resolution 0.029 Hz at 125 MHz), returned in `f64` so
 //! the firmware knows the frequency it actually commanded. Phase offsets are 14-bit
 //! (`POW / 2^14` of a turn). Amplitudes are 10-bit ASF with the amplitude multiplier
 //! enabled; the pump's voltage scale `s = (V/V0)²` maps to `ASF = round(1023·√s)`, i.e.
@@ -43,17 +43,23 @@
 //! use paragyro_firmware::drivers::ad9959::{AmplitudeWord, PumpPlan, DEFAULT_SYSCLK_HZ};
 //!
 //! let plan = PumpPlan::new(21_900.0, DEFAULT_SYSCLK_HZ).unwrap();
-//! assert_eq!(plan.pump_ftw(), 188_120);
+//! assert_eq!(plan.pump_ftw(), 752_478);
 //! assert_eq!(plan.pump_ftw(), 2 * plan.reference_ftw());
 //! assert_eq!(plan.third_ftw(), 3 * plan.reference_ftw());
-//! assert!((plan.pump_hz() - 21_900.0).abs() < 0.12); // 21 900.050 Hz
+//! assert!((plan.pump_hz() - 21_900.0).abs() < 0.03); // 21 899.992 Hz
 //! assert_eq!(AmplitudeWord::from_scale(0.81).get(), 921);
 //! ```
 
 use embedded_hal::spi::{Operation, SpiDevice};
 
-/// Default SYSCLK, Hz.
-pub const DEFAULT_SYSCLK_HZ: f64 = 500e6;
+/// The board's SYSCLK, Hz: 25 MHz × 5 (the PLL's low VCO range). The pump's word is
+/// 2·f_SYSCLK/2³² = 0.058 Hz, a quarter of 500 MHz's 0.233 Hz: each step of the pump's
+/// frequency kicks the drive's ≈ 100 Hz envelope mode, which the fast rate channel reads
+/// at 75–150 Hz, and at 500 MHz the frequency's words added 0.126 °/s rms and a −0.09 to
+/// −0.17 °/s bias to the rate, at 125 MHz 0.037–0.040 and +0.01 to +0.03
+/// (`cargo run --release -p paragyro-fil --example dds_words`, `rate-step` seeds 1–3). The
+/// pump at ≈ 22 kHz needs nothing of the higher clock.
+pub const DEFAULT_SYSCLK_HZ: f64 = 125e6;
 /// Highest SYSCLK of the part, Hz.
 pub const MAX_SYSCLK_HZ: f64 = 500e6;
 /// `2^32`, the FTW scale.

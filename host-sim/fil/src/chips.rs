@@ -129,7 +129,7 @@ impl Default for Dds {
 }
 
 impl Dds {
-    /// After a master reset, SYSCLK 500 MHz (the board's).
+    /// After a master reset, the board's SYSCLK (`DEFAULT_SYSCLK_HZ`, 125 MHz).
     pub fn new() -> Self {
         Self {
             cap: DdsCapture::new(DEFAULT_SYSCLK_HZ),

@@ -2,7 +2,7 @@
 //! the same scenario it is compared with.
 
 use paragyro_core::Estimator;
-use paragyro_firmware::drivers::ad9959::AmplitudeWord;
+use paragyro_firmware::drivers::ad9959::{AmplitudeWord, DEFAULT_SYSCLK_HZ, FTW_SCALE};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::rate_response::{RampFit, ramp_fit};
 use paragyro_simulator::runner;
@@ -70,6 +70,10 @@ pub struct LoopNumbers {
     /// The fast rate of every sample, °/s (for `trace.csv`; not in `summary.json`).
     #[serde(skip)]
     pub rates: Vec<f64>,
+    /// The drive's lock-in amplitude |x1| of every sample, µm (for `examples/dds_words.rs`;
+    /// not in `summary.json`).
+    #[serde(skip)]
+    pub drive_amps: Vec<f64>,
 }
 
 /// The firmware's fault counters at the end, by name.
@@ -242,6 +246,18 @@ pub fn host_only(
     leg: Option<RampLeg>,
     words: HostWords,
 ) -> anyhow::Result<LoopNumbers> {
+    host_only_on(sc, seed, pump, leg, WordGrid::of(words))
+}
+
+/// [`host_only`] with the pump rounded to the words of `grid` (the board's, or a finer
+/// DDS's: `examples/dds_words.rs`).
+pub fn host_only_on(
+    sc: &Scenario,
+    seed: u64,
+    pump: BoardPump,
+    leg: Option<RampLeg>,
+    grid: WordGrid,
+) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
     sc.sim.pump_profile = pump.sim_profile();
     let cfg = crate::session::core_config(&sc, pump.core_profile());
@@ -255,7 +271,7 @@ pub fn host_only(
     let mut health_end = 0;
     let mut wy2_true = f64::NAN;
     let mut rates = Vec::new();
-    let mut words = BoardWords::new(words, pump);
+    let mut words = BoardWords::on_grid(grid, pump);
     runner::closed_loop_hooked(
         &sc,
         seed,
@@ -291,6 +307,7 @@ pub fn host_only(
         ramp,
         rate_error: RateError::of(&sc, &rates, None),
         rates: rates.iter().map(|r| r.2).collect(),
+        drive_amps: damp.iter().map(|d| d.1).collect(),
     })
 }
 
@@ -315,8 +332,35 @@ pub struct HostWords {
     pub frequency: bool,
 }
 
-/// The host-only loop's pump as the board's DDS makes it ([`HostWords`]; hooks that change
-/// nothing when both are off).
+/// The AD9959's amplitude words, bits (`AmplitudeWord::FULL` is `2^10 − 1`: test).
+pub const BOARD_AMPLITUDE_BITS: u32 = 10;
+
+/// The resolution of the words the host-only loop's pump is rounded to ([`BoardWords`]):
+/// the board's ([`WordGrid::of`]) or another DDS's, to price each word's part of the rate's
+/// error (`examples/dds_words.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WordGrid {
+    /// The amplitude's words, bits (10: the AD9959's, its own `AmplitudeWord::from_scale`;
+    /// more: `round((2^bits − 1)·√(m/full_scale))`); `None`: not rounded.
+    pub amplitude_bits: Option<u32>,
+    /// The frequency's words, as the DDS's SYSCLK that makes them, Hz (a pump word is
+    /// `2·f_SYSCLK/2³²`: the board's 125 MHz, `ad9959::DEFAULT_SYSCLK_HZ`, makes 0.058 Hz);
+    /// `None`: not rounded.
+    pub frequency_sysclk_hz: Option<f64>,
+}
+
+impl WordGrid {
+    /// The board's words where `words` asks for them.
+    pub fn of(words: HostWords) -> Self {
+        WordGrid {
+            amplitude_bits: words.amplitude.then_some(BOARD_AMPLITUDE_BITS),
+            frequency_sysclk_hz: words.frequency.then_some(DEFAULT_SYSCLK_HZ),
+        }
+    }
+}
+
+/// The host-only loop's pump as the board's DDS makes it ([`HostWords`], or the words of
+/// any [`WordGrid`]; hooks that change nothing when both are off).
 ///
 /// * Amplitude: the core's multiplier `m` of the scenario's pump scale becomes the
 ///   AD9959's amplitude word, `ASF = round(1023·√(m/full_scale))` (the force goes with the
@@ -330,8 +374,9 @@ pub struct HostWords {
 ///   next sample reports that sweep's end and the core is told its move, 2(b − a) words
 ///   (`Estimator::set_pump_sweep_hz`), as the board's `App::tell_steps`.
 pub struct BoardWords {
-    amplitude_full_scale: Option<f64>,
-    /// Hz per reference word (`paragyro_firmware::run::pump_step_hz`), with the words.
+    /// The amplitude's full scale and bits, with the words.
+    amplitude_full_scale: Option<(f64, u32)>,
+    /// Hz per pump word (`paragyro_firmware::run::pump_step_hz` on the board), with the words.
     frequency_hz_per_word: Option<f64>,
     node: Option<i32>,
     residual: i32,
@@ -339,14 +384,20 @@ pub struct BoardWords {
 }
 
 impl BoardWords {
-    /// The hooks for `words` (the frequency's only with the board's two steps).
+    /// The hooks for the board's `words` (the frequency's only with the board's two steps).
     pub fn new(words: HostWords, pump: BoardPump) -> Self {
+        Self::on_grid(WordGrid::of(words), pump)
+    }
+
+    /// The hooks for the words of `grid` (the frequency's only with the board's two steps).
+    pub fn on_grid(grid: WordGrid, pump: BoardPump) -> Self {
+        let full = f64::from(paragyro_firmware::run::AMPLITUDE.full_scale);
         BoardWords {
-            amplitude_full_scale: words
-                .amplitude
-                .then(|| f64::from(paragyro_firmware::run::AMPLITUDE.full_scale)),
-            frequency_hz_per_word: (words.frequency && pump == BoardPump::HalfSteps)
-                .then(paragyro_firmware::run::pump_step_hz),
+            amplitude_full_scale: grid.amplitude_bits.map(|b| (full, b.clamp(1, 30))),
+            frequency_hz_per_word: grid
+                .frequency_sysclk_hz
+                .filter(|f| *f > 0.0 && pump == BoardPump::HalfSteps)
+                .map(|f| 2.0 * f / FTW_SCALE),
             node: None,
             residual: 0,
             sweep_hz: None,
@@ -355,12 +406,17 @@ impl BoardWords {
 
     /// The multiplier `m` as the amplitude words give it (`m` itself without them).
     pub fn round_amplitude(&self, m: f64) -> f64 {
-        let Some(full) = self.amplitude_full_scale else {
+        let Some((full, bits)) = self.amplitude_full_scale else {
             return m;
         };
-        // the board's own word for the scale `m/full_scale`
-        let word = AmplitudeWord::from_scale((m / full) as f32);
-        (f64::from(word.get()) / 1023.0).powi(2) * full
+        let top = f64::from((1u32 << bits) - 1);
+        let word = if bits == BOARD_AMPLITUDE_BITS {
+            // the board's own word for the scale `m/full_scale`
+            f64::from(AmplitudeWord::from_scale((m / full) as f32).get())
+        } else {
+            (top * (m / full).clamp(0.0, 1.0).sqrt()).round()
+        };
+        (word / top).powi(2) * full
     }
 }
 
@@ -488,8 +544,9 @@ pub struct Expect {
 pub const DRIVE_LOST_RATIO: f64 = 0.5;
 /// `Health::bits` bit of `drive_locked`.
 pub const DRIVE_LOCKED_BIT: u32 = 1 << 4;
-/// The pump at the end, loop against host-only: four pump words (0.93 Hz), the DDS's
-/// quantisation plus the `f32` commands' differences.
+/// The pump at the end, loop against host-only: the DDS's quantisation plus the `f32`
+/// commands' differences; four pump words of a 500 MHz SYSCLK (0.93 Hz), sixteen of the
+/// board's 125 MHz.
 pub const PUMP_FIL_VS_HOST_HZ: f64 = 0.94;
 
 /// The summary of a session against the host-only loop.
@@ -779,6 +836,51 @@ mod tests {
         assert_eq!(w.round_amplitude(9.0), full);
         let off = BoardWords::new(HostWords::default(), BoardPump::HalfSteps);
         assert_eq!(off.round_amplitude(1.0), 1.0);
+    }
+
+    /// The board's grid is the board's words, and a finer amplitude grid rounds to its own
+    /// words: 12 bits within half a 12-bit word of the exact scale.
+    #[test]
+    fn a_word_grid_is_the_boards_at_the_boards_resolution_and_finer_above_it() {
+        assert_eq!(
+            (1u32 << BOARD_AMPLITUDE_BITS) - 1,
+            u32::from(AmplitudeWord::FULL.get())
+        );
+        let both = HostWords {
+            amplitude: true,
+            frequency: true,
+        };
+        let grid = WordGrid::of(both);
+        assert_eq!(grid.amplitude_bits, Some(10));
+        assert_eq!(grid.frequency_sysclk_hz, Some(DEFAULT_SYSCLK_HZ));
+        let board = BoardWords::new(both, BoardPump::HalfSteps);
+        let on = BoardWords::on_grid(grid, BoardPump::HalfSteps);
+        let fine = BoardWords::on_grid(
+            WordGrid {
+                amplitude_bits: Some(12),
+                frequency_sysclk_hz: Some(DEFAULT_SYSCLK_HZ / 4.0),
+            },
+            BoardPump::HalfSteps,
+        );
+        let full = f64::from(paragyro_firmware::run::AMPLITUDE.full_scale);
+        let mut worst_board: f64 = 0.0;
+        for k in 0..200 {
+            let m = 0.9 + 0.001 * f64::from(k);
+            assert_eq!(board.round_amplitude(m), on.round_amplitude(m));
+            // in words of the root: |√(m'/full) − √(m/full)| ≤ half a word
+            let word = |x: f64| (x / full).sqrt();
+            let e12 = (word(fine.round_amplitude(m)) - word(m)).abs() * 4095.0;
+            assert!(e12 <= 0.5 + 1e-9, "{m}: {e12}");
+            worst_board =
+                worst_board.max((word(board.round_amplitude(m)) - word(m)).abs() * 4095.0);
+        }
+        assert!(
+            worst_board > 1.0,
+            "the board's words are coarser: {worst_board}"
+        );
+        let hpw = paragyro_firmware::run::pump_step_hz();
+        assert_eq!(board.frequency_hz_per_word, Some(hpw));
+        assert_eq!(fine.frequency_hz_per_word, Some(hpw / 4.0));
     }
 
     /// With the frequency words the plant's two steps are the board's whole words and the
