@@ -13,7 +13,7 @@
 //! a probe of the sampling, with the core and the plant at 1 000 Hz (not a validated
 //! configuration: the other settings are the 500 Hz ones). Prints Markdown.
 
-use paragyro_core::{Estimator, Sample, StepOutput};
+use paragyro_core::Estimator;
 use paragyro_fil::session::{BoardPump, core_config};
 use paragyro_simulator::{plant::PlantInputs, runner};
 
@@ -27,16 +27,6 @@ struct Modulate {
 }
 
 impl runner::LoopHooks<f32> for Modulate {
-    fn step(
-        &mut self,
-        _k: u64,
-        est: &mut Estimator<f32>,
-        s: &mut Sample<f32>,
-        _l: &StepOutput,
-    ) -> StepOutput {
-        est.step(s)
-    }
-
     fn inputs(
         &mut self,
         k: u64,
