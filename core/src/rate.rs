@@ -37,7 +37,14 @@
 //! amplitude × frequency^2.3 and ∝ `svf_hz`^2.7; the same with no rate, with the lock-in
 //! low-pass at 100 or 200 Hz, and with a plant integrated twice as finely). Each output of
 //! the wide filter is corrected, `F_j − ε_j u″` with `u″ = F2/(1+ε2)` (a few
-//! multiply-adds per signal): the noise-free tone falls to ≈ 0.08 °/s. The narrow channel
+//! multiply-adds per signal): the noise-free tone falls to ≈ 0.08 °/s (0.067 °/s rms
+//! deterministic error with the band taps below). Above a few tens of Hz the correction,
+//! exact for slow curvature, leaves `F0`'s ratio to the continuous filter 2–6 % from `F1`'s
+//! at 60–100 Hz, and the row balances `2iω·F1(B)` against the quadrature's `θ23·F0(A)`: the
+//! ringing every DDS word step leaves in the drive (its ≈ 100 Hz envelope mode) was read as
+//! a rate. `F0` (of `A` and of `v`) therefore also takes the band taps,
+//! `−a·e0·F2[k] − b·e0·(F2[k] − F2[k−1])`, least squares over 5–100 Hz
+//! ([`crate::svf::band_taps`], shipped for the default design; README "DDS words"). The narrow channel
 //! (40 Hz, `wT` = 0.5, `ε2` = −2 %) is left as it is.
 //!
 //! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2` with `μ̂xy = −(θ14 + θ24)/2` of the slow RLS.
@@ -99,7 +106,7 @@ use crate::config::Config;
 use crate::physics::theta_from_physical;
 use crate::real::Real;
 use crate::rows::{Envelopes, Known};
-use crate::svf::{CSvfState, SvfCoeffs, parabola_bias};
+use crate::svf::{BAND_TAPS, CSvfState, SvfCoeffs, parabola_bias};
 
 /// The FOH discretisation's curvature bias of one filter, as applied to its outputs
 /// (`svf::parabola_bias`): `F0 − e0·F2`, `F1 − e1·F2`, `F2·g` with `e_j = ε_j/(1+ε2)`,
@@ -107,20 +114,38 @@ use crate::svf::{CSvfState, SvfCoeffs, parabola_bias};
 /// `F0(A)`. Left out, as too small to matter (an experiment correcting them too moved the
 /// noise-free tone at 150 Hz by 0.2 m°/s): `F1(B)` (times θ21 ≈ 1e-3), and `F1(A)`,
 /// `F0(ωA)` of the Coriolis column (times θ24: a relative change of the rate of ~1e-7).
+///
+/// With the band taps ([`crate::svf::band_taps`]) `F0` also takes `−a·e0·F2[k]` and
+/// `−b·e0·(F2[k] − F2[k−1])`, which even its ratio to the continuous filter with `F1`'s up
+/// to 100 Hz (where the ringing of every DDS word step lies; README "DDS words"). Shipped
+/// for the default design ([`crate::svf::BAND_WT`]); another `rate.svf_hz` or `fs_hz` keeps the
+/// curvature correction alone.
 #[derive(Clone, Copy, Debug, Default)]
 struct Curvature<T> {
     e0: T,
     e1: T,
     g: T,
+    /// `b·e0` (0: no band taps); `e0` holds `(1 + a + b)·e0`: `F0 − e0·F2[k] + lead·F2[k−1]`.
+    lead: T,
 }
 
 impl<T: Real> Curvature<T> {
-    fn of(eps: [f64; 3]) -> Self {
+    /// `taps`: the band taps apply (the default design, [`crate::svf::BAND_WT`]). In `T` past the
+    /// curvature's `f64` (on the chip no further soft-`f64`: flash).
+    fn of(eps: [f64; 3], taps: bool) -> Self {
         let g = 1.0 / (1.0 + eps[2]);
+        let e0 = T::from_f64(eps[0] * g);
+        let (a, b) = if taps {
+            (T::from_f64(BAND_TAPS[0]), T::from_f64(BAND_TAPS[1]))
+        } else {
+            (T::ZERO, T::ZERO)
+        };
+        let lead = b * e0;
         Curvature {
-            e0: T::from_f64(eps[0] * g),
+            e0: e0 + a * e0 + lead,
             e1: T::from_f64(eps[1] * g),
             g: T::from_f64(g),
+            lead,
         }
     }
 }
@@ -232,24 +257,31 @@ impl<T: Real> RateDesign<T> {
         let (_, th2) = theta_from_physical(&cfg.nominal);
         let om_ref = cfg.pump_centre_hz / (2.0 * cfg.f0_hz);
         let to_dps = omega0 * (180.0 / core::f64::consts::PI);
-        let lock = cfg.retune.lock_min_um / cfg.l0_um;
+        let lock = T::from_f64(cfg.retune.lock_min_um / cfg.l0_um);
+        // the thresholds in `T` (on the chip FPU operations, not soft-`f64` calls: flash)
+        let to_dps_t = T::from_f64(to_dps);
+        let inv_dps = T::ONE / to_dps_t;
         RateDesign {
             svf: SvfCoeffs::new(wf, ts),
             post: PostCoeffs::of(POST_HZ, POST_ZETA, cfg.fs_hz),
-            bias: Curvature::of(parabola_bias::<T>(wf, ts)),
+            // the band taps' design: 150 Hz at 500 Hz (`BAND_WT`)
+            bias: Curvature::of(
+                parabola_bias::<T>(wf, ts),
+                cfg.rate.svf_hz == 150.0 && cfg.fs_hz == 500.0,
+            ),
             svf_cpl: SvfCoeffs::new(wc, ts),
             th23_ref: T::from_f64(th2[2]),
             gamma_ref: T::from_f64(cfg.nominal.gamma),
             to_dps,
-            to_dps_t: T::from_f64(to_dps),
-            inv_ts: T::from_f64(1.0 / ts),
+            to_dps_t,
+            inv_ts: T::ONE / T::from_f64(ts),
             alpha_slow: T::from_f64(1.0 - cfg.rls.forgetting),
-            full_scale: T::from_f64(cfg.rate.full_scale_dps / to_dps),
-            gate_accel: T::from_f64(cfg.rate.gate_accel_dps2 / to_dps / omega0),
+            full_scale: T::from_f64(cfg.rate.full_scale_dps) * inv_dps,
+            gate_accel: T::from_f64(cfg.rate.gate_accel_dps2) * inv_dps / T::from_f64(omega0),
             gate_len: libm::round(cfg.rate.gate_s * cfg.fs_hz).max(0.0) as u64,
-            gate_dev: T::from_f64(2.0 * cfg.rate.gate_dev_dps / to_dps),
-            min_amp2: T::from_f64(lock * lock),
-            inv_2om: T::from_f64(0.5 / om_ref),
+            gate_dev: T::from_f64(2.0 * cfg.rate.gate_dev_dps) * inv_dps,
+            min_amp2: lock * lock,
+            inv_2om: T::from_f64(0.5) / T::from_f64(om_ref),
             om_ref2: om_ref * om_ref,
         }
     }
@@ -314,6 +346,8 @@ struct FastFilters<T> {
     v: CSvfState<T>,
     a: CSvfState<T>,
     oma: CSvfState<T>,
+    /// `F2` of `v` and of `A` at the last sample (the band taps).
+    f2_last: [Cplx<T>; 2],
 }
 
 impl<T: Real> FastFilters<T> {
@@ -324,6 +358,7 @@ impl<T: Real> FastFilters<T> {
             v: CSvfState::at_rest(s.v),
             a: CSvfState::at_rest(s.a),
             oma: CSvfState::at_rest(s.oma),
+            f2_last: [Cplx::default(); 2],
         }
     }
 
@@ -345,12 +380,15 @@ impl<T: Real> FastFilters<T> {
         let foma = self.oma.update(c, s.oma);
         // the curvature correction where it reaches the rate (`Curvature`)
         let (f2b, f1omb, f0v, f0a) = match cv {
-            Some(cv) => (
-                fb.f2.scale(cv.g),
-                fomb.f1 - fomb.f2.scale(cv.e1),
-                fv.f0 - fv.f2.scale(cv.e0),
-                fa.f0 - fa.f2.scale(cv.e0),
-            ),
+            Some(cv) => {
+                let [v1, a1] = core::mem::replace(&mut self.f2_last, [fv.f2, fa.f2]);
+                (
+                    fb.f2.scale(cv.g),
+                    fomb.f1 - fomb.f2.scale(cv.e1),
+                    fv.f0 - fv.f2.scale(cv.e0) + v1.scale(cv.lead),
+                    fa.f0 - fa.f2.scale(cv.e0) + a1.scale(cv.lead),
+                )
+            }
             None => (fb.f2, fomb.f1, fv.f0, fa.f0),
         };
         let z = f2b + f1omb.scale(T::from_f64(2.0)).mul_i() - fb.f1.scale(th.th21) + f0v;

@@ -97,19 +97,104 @@ pub fn parabola_bias<T: Real>(w: f64, ts: f64) -> [f64; 3] {
     // ~1e7 to ~1/w² over the run, so its rounding stays ~1e-3 of `ε0` and below (test)
     let c = SvfCoeffs::<T>::new(w, ts);
     let n = libm::round(80.0 / h + 0.5).clamp(8.0, 4000.0) as u32;
+    // the samples t²/2 in `T` too (FPU operations on the chip: flash)
+    let (tt, nn) = (T::from_f64(ts), T::ratio(u64::from(n), 1));
     let u = |k: u32| {
-        let t = (k as f64 - n as f64) * ts;
-        T::from_f64(0.5 * t * t)
+        let t = (T::ratio(u64::from(k), 1) - nn) * tt;
+        T::from_f64(0.5) * t * t
     };
     let mut st = SvfState::at_rest(u(0));
     let mut out = st.outputs(&c);
     for k in 1..=n {
         out = st.update(&c, u(k));
     }
+    let wt = T::from_f64(w);
     [
-        out.f0.to_f64() - 3.0 / (w * w) - ts * ts / 12.0,
-        out.f1.to_f64() + 2.0 / w,
-        out.f2.to_f64() - 1.0,
+        (out.f0 - T::from_f64(3.0) / (wt * wt) - tt * tt / T::from_f64(12.0)).to_f64(),
+        (out.f1 + T::from_f64(2.0) / wt).to_f64(),
+        (out.f2 - T::ONE).to_f64(),
+    ]
+}
+
+/// `wT` of the fast rate channel's default wide filter (150 Hz at 500 Hz samples): the design
+/// [`BAND_TAPS`] holds for.
+pub const BAND_WT: f64 = 2.0 * core::f64::consts::PI * 150.0 / 500.0;
+
+/// [`band_taps`] at [`BAND_WT`], designed on the host and shipped (the design runs ≈ 10⁵
+/// filter updates: not on the chip; test `the_shipped_band_taps_are_the_design`).
+pub const BAND_TAPS: [f64; 2] = [2.1532246804870003, 7.862743680729376];
+
+/// The band taps of `F0`, in units of the curvature correction's `e0`: `[a, b]` such that
+/// `F0 − (1 + a)·e0·F2[k] − b·e0·(F2[k] − F2[k−1])` has, for a sampled sinusoid at Ω, the
+/// same ratio to the continuous filter's output as `F1 − e1·F2` has to its own, in the least
+/// squares over Ω from w/30 to 2w/3 (5–100 Hz at the default 150 Hz), `e0`, `e1` the
+/// curvature correction of [`parabola_bias`] (`ε_j/(1+ε2)`).
+///
+/// Why: a row relation between filtered signals holds when every output's ratio to the
+/// continuous filter is the same. FOH-exact, the ratios drift apart above a few % of the
+/// sample rate (the interpolant's images pass `F1`'s band-pass more than `F0`'s low-pass),
+/// and the curvature correction evens them only to second order: at 100 Hz at the default
+/// `wT` `F1`'s ratio is 6 % from `F0`'s (`cargo run -p paragyro-core --example svf_band`).
+/// The fast rate row balances `2iω·F1(B)` against the quadrature's `θ23·F0(A)`, so a drive
+/// ringing at 60–150 Hz (every DDS word step kicks its ≈ 100 Hz envelope mode) was read as
+/// a rate in proportion.
+///
+/// Design time, `f64`, `w = 1`: the discrete filter's steady state on a sampled `e^{iΩt}`.
+pub fn band_taps(wt: f64) -> [f64; 2] {
+    if !(wt > 0.0 && wt.is_finite()) {
+        return [0.0; 2];
+    }
+    let (w, ts) = (1.0, wt);
+    let c = SvfCoeffs::<f64>::new(w, ts);
+    let eps = parabola_bias::<f64>(w, ts);
+    let g = 1.0 / (1.0 + eps[2]);
+    let (e0, e1) = (eps[0] * g, eps[1] * g);
+    type C = (f64, f64);
+    let mul = |a: C, b: C| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
+    let div = |a: C, b: C| {
+        let d = b.0 * b.0 + b.1 * b.1;
+        ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
+    };
+    let (mut ata, mut atb) = ([[0.0f64; 2]; 2], [0.0f64; 2]);
+    for q in 1..=20 {
+        let om = w * f64::from(q) / 30.0;
+        let x = om * ts;
+        // steady state: run long enough for e^{-wT·k} to vanish, divide by the last input
+        let (mut re, mut im) = (SvfState::at_rest(1.0), SvfState::at_rest(0.0));
+        let n = libm::ceil(60.0 / wt) as u32 + 200;
+        let mut d = [(0.0, 0.0); 3];
+        for k in 1..=n {
+            let (sn, cs) = libm::sincos(x * f64::from(k));
+            let (r, i) = (re.update(&c, cs), im.update(&c, sn));
+            if k == n {
+                let back = (cs, -sn);
+                d = [
+                    mul((r.f0, i.f0), back),
+                    mul((r.f1, i.f1), back),
+                    mul((r.f2, i.f2), back),
+                ];
+            }
+        }
+        let h0 = div((w * w, 0.0), mul((w, om), (w, om)));
+        let h1 = mul(h0, (0.0, om));
+        let r0 = div((d[0].0 - e0 * d[2].0, d[0].1 - e0 * d[2].1), h0);
+        let r1 = div((d[1].0 - e1 * d[2].0, d[1].1 - e1 * d[2].1), h1);
+        // −a·F2[k] and −b·(F2[k] − F2[k−1]) move F0's ratio by these
+        let col_a = div((-d[2].0, -d[2].1), h0);
+        let col_b = mul(col_a, (1.0 - libm::cos(x), libm::sin(x)));
+        let t = (r1.0 - r0.0, r1.1 - r0.1);
+        let cols = [col_a, col_b];
+        for i in 0..2 {
+            for j in 0..2 {
+                ata[i][j] += cols[i].0 * cols[j].0 + cols[i].1 * cols[j].1;
+            }
+            atb[i] += cols[i].0 * t.0 + cols[i].1 * t.1;
+        }
+    }
+    let det = ata[0][0] * ata[1][1] - ata[0][1] * ata[1][0];
+    [
+        (atb[0] * ata[1][1] - atb[1] * ata[0][1]) / det / e0,
+        (ata[0][0] * atb[1] - ata[1][0] * atb[0]) / det / e0,
     ]
 }
 
@@ -219,6 +304,22 @@ impl<T: Real> CSvfState<T> {
 
 #[cfg(test)]
 mod tests {
+    /// The shipped taps are the design at the default `wT` (to 1e-9 relative).
+    #[test]
+    fn the_shipped_band_taps_are_the_design() {
+        let t = band_taps(BAND_WT);
+        std::println!("band taps at wT = {BAND_WT}: {t:?}");
+        for hz in [40.0, 80.0, 100.0, 120.0, 150.0, 180.0, 200.0] {
+            let wt = 2.0 * core::f64::consts::PI * hz / 500.0;
+            std::println!("{hz} Hz: {:?}", band_taps(wt));
+        }
+        for j in 0..2 {
+            assert!(
+                (BAND_TAPS[j] - t[j]).abs() <= 1e-9 * t[j].abs(),
+                "{BAND_TAPS:?} against {t:?}"
+            );
+        }
+    }
     extern crate std;
     use super::*;
     use std::vec::Vec;
