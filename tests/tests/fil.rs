@@ -282,8 +282,9 @@ fn the_drive_falling_out_of_its_band_is_flagged() {
 }
 
 /// The firmware path's rate error beyond the host-only loop's, while the dither runs
-/// (0.190–0.198 °/s rms on `rate-step` seeds 1–10 with the AD9959 at 125 MHz, 0.230–0.233
-/// at 500 MHz; README "DDS words"), is the DDS's words: with the host-only loop's pump
+/// (0.105–0.118 °/s rms on `rate-step` seeds 1–10 with the AD9959 at 125 MHz and the wide
+/// filter's band taps, 0.230–0.233 at 500 MHz before them; README "DDS words"), is the DDS's
+/// words: with the host-only loop's pump
 /// rounded to them as the board's are (the 10-bit amplitude, the frequency's two
 /// whole-word steps with error feedback and their sweep told to the core), the two loops'
 /// rates agree sample by sample within 0.05 °/s rms (measured 0.003–0.006 on seeds 1–10;
