@@ -250,11 +250,13 @@ impl<T: Real> State<T> {
         *det2 = ChangeDetector::new(&d.fit.change);
         *exc = ExcitationMeter::default();
         *settle = SettleTest::default();
-        *dithered = dither_amp / core::f64::consts::SQRT_2 > 0.0;
         *exc_var_min = {
             let v = cfg.monitor.excitation_min_fraction * dither_amp / core::f64::consts::SQRT_2;
             T::from_f64(v * v)
         };
+        // dithered only if the excitation threshold is positive in `T` (see
+        // `set_dither_pump_hz`)
+        *dithered = *exc_var_min > T::ZERO;
         *excited_once = false;
         *last_s = T::ONE;
         *sched = scheduler(cfg, om_ref, dither_amp);
@@ -309,9 +311,13 @@ impl<T: Real> State<T> {
             let amp = pump_hz / (2.0 * d.units.f0_hz);
             self.sched.set_dither_amp(amp);
             let rms = amp / core::f64::consts::SQRT_2;
-            self.dithered = rms > 0.0;
             let v = d.cfg.monitor.excitation_min_fraction * rms;
             self.exc_var_min = T::from_f64(v * v);
+            // a dither too small for its excitation threshold to be positive in `T` is no
+            // dither: a fuzzed 1e-193 Hz counted as dithered with a zero threshold, so the
+            // slow RLS forgot while nothing excited it and the pump command went NaN
+            // (regression `tests/fuzz/regressions/estimator_step/nan-pump-25c8d0ac`)
+            self.dithered = self.exc_var_min > T::ZERO;
         }
         ok
     }
