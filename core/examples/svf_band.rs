@@ -16,7 +16,7 @@
 //! (`svf::band_taps`) and what they leave of `R1 − R0`. Prints Markdown.
 
 use paragyro_core::Config;
-use paragyro_core::svf::{BAND_TAPS, BAND_WT, SvfCoeffs, SvfState, band_taps, parabola_bias};
+use paragyro_core::svf::{BAND_TAPS, BAND_WT, band_taps, parabola_bias, sine_response};
 
 type C = (f64, f64);
 
@@ -29,27 +29,6 @@ fn div(a: C, b: C) -> C {
     ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
 }
 
-/// The discrete outputs' steady state for the samples of `e^{iΩt}`, `x = ΩT` per sample,
-/// divided by the input at the last sample.
-fn discrete(c: &SvfCoeffs<f64>, x: f64) -> [C; 3] {
-    let (mut re, mut im) = (SvfState::at_rest(1.0), SvfState::at_rest(0.0));
-    let n = 20_000;
-    let mut out = [(0.0, 0.0); 3];
-    for k in 1..=n {
-        let (s, co) = (x * k as f64).sin_cos();
-        let (r, i) = (re.update(c, co), im.update(c, s));
-        if k == n {
-            let back = (co, -s);
-            out = [
-                mul((r.f0, i.f0), back),
-                mul((r.f1, i.f1), back),
-                mul((r.f2, i.f2), back),
-            ];
-        }
-    }
-    out
-}
-
 fn fmt(c: C) -> String {
     format!("{:.4} {:+.4}i", c.0, c.1)
 }
@@ -59,7 +38,6 @@ fn main() {
     let omega0 = cfg.omega0_rad_s();
     let ts = omega0 / cfg.fs_hz;
     let w = 2.0 * std::f64::consts::PI * cfg.rate.svf_hz / omega0;
-    let c = SvfCoeffs::<f64>::new(w, ts);
     let eps = parabola_bias::<f64>(w, ts);
     let g = 1.0 / (1.0 + eps[2]);
     let (e0, e1) = (eps[0] * g, eps[1] * g);
@@ -75,7 +53,7 @@ fn main() {
     println!("|---|---|---|---|---|---|---|---|");
     for hz in [5.0, 10.0, 30.0, 60.0, 80.0, 100.0, 150.0] {
         let om = 2.0 * std::f64::consts::PI * hz / omega0;
-        let d = discrete(&c, om * ts);
+        let d = sine_response(w, ts, om * ts);
         let s = (0.0, om);
         let h0 = div((w * w, 0.0), mul((w, om), (w, om)));
         let h = [h0, mul(h0, s), mul(mul(h0, s), s)];
@@ -111,7 +89,7 @@ fn main() {
     for hz in [5.0, 10.0, 30.0, 60.0, 80.0, 100.0, 150.0] {
         let om = 2.0 * std::f64::consts::PI * hz / omega0;
         let x = om * ts;
-        let d = discrete(&c, x);
+        let d = sine_response(w, ts, x);
         let s = (0.0, om);
         let h0 = div((w * w, 0.0), mul((w, om), (w, om)));
         let h1 = mul(h0, s);

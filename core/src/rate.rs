@@ -106,7 +106,7 @@ use crate::config::Config;
 use crate::physics::theta_from_physical;
 use crate::real::Real;
 use crate::rows::{Envelopes, Known};
-use crate::svf::{BAND_TAPS, CSvfState, SvfCoeffs, parabola_bias};
+use crate::svf::{BAND_FS_HZ, BAND_SVF_HZ, BAND_TAPS, CSvfState, SvfCoeffs, parabola_bias};
 
 /// The FOH discretisation's curvature bias of one filter, as applied to its outputs
 /// (`svf::parabola_bias`): `F0 − e0·F2`, `F1 − e1·F2`, `F2·g` with `e_j = ε_j/(1+ε2)`,
@@ -264,10 +264,9 @@ impl<T: Real> RateDesign<T> {
         RateDesign {
             svf: SvfCoeffs::new(wf, ts),
             post: PostCoeffs::of(POST_HZ, POST_ZETA, cfg.fs_hz),
-            // the band taps' design: 150 Hz at 500 Hz (`BAND_WT`)
             bias: Curvature::of(
                 parabola_bias::<T>(wf, ts),
-                cfg.rate.svf_hz == 150.0 && cfg.fs_hz == 500.0,
+                cfg.rate.svf_hz == BAND_SVF_HZ && cfg.fs_hz == BAND_FS_HZ,
             ),
             svf_cpl: SvfCoeffs::new(wc, ts),
             th23_ref: T::from_f64(th2[2]),

@@ -116,9 +116,13 @@ pub fn parabola_bias<T: Real>(w: f64, ts: f64) -> [f64; 3] {
     ]
 }
 
-/// `wT` of the fast rate channel's default wide filter (150 Hz at 500 Hz samples): the design
-/// [`BAND_TAPS`] holds for.
-pub const BAND_WT: f64 = 2.0 * core::f64::consts::PI * 150.0 / 500.0;
+/// The fast rate channel's default wide filter, Hz, and sample rate, Hz: the design
+/// [`BAND_TAPS`] holds for (`rate.svf_hz`, `fs_hz`).
+pub const BAND_SVF_HZ: f64 = 150.0;
+/// See [`BAND_SVF_HZ`].
+pub const BAND_FS_HZ: f64 = 500.0;
+/// `wT` of that design.
+pub const BAND_WT: f64 = 2.0 * core::f64::consts::PI * BAND_SVF_HZ / BAND_FS_HZ;
 
 /// [`band_taps`] at [`BAND_WT`], designed on the host and shipped (the design runs ≈ 10⁵
 /// filter updates: not on the chip; test `the_shipped_band_taps_are_the_design`).
@@ -139,13 +143,13 @@ pub const BAND_TAPS: [f64; 2] = [2.1532246804870003, 7.862743680729376];
 /// ringing at 60–150 Hz (every DDS word step kicks its ≈ 100 Hz envelope mode) was read as
 /// a rate in proportion.
 ///
-/// Design time, `f64`, `w = 1`: the discrete filter's steady state on a sampled `e^{iΩt}`.
+/// Design time, `f64`, `w = 1`: the discrete filter's steady state on a sampled `e^{iΩt}`
+/// ([`sine_response`]).
 pub fn band_taps(wt: f64) -> [f64; 2] {
     if !(wt > 0.0 && wt.is_finite()) {
         return [0.0; 2];
     }
     let (w, ts) = (1.0, wt);
-    let c = SvfCoeffs::<f64>::new(w, ts);
     let eps = parabola_bias::<f64>(w, ts);
     let g = 1.0 / (1.0 + eps[2]);
     let (e0, e1) = (eps[0] * g, eps[1] * g);
@@ -159,22 +163,7 @@ pub fn band_taps(wt: f64) -> [f64; 2] {
     for q in 1..=20 {
         let om = w * f64::from(q) / 30.0;
         let x = om * ts;
-        // steady state: run long enough for e^{-wT·k} to vanish, divide by the last input
-        let (mut re, mut im) = (SvfState::at_rest(1.0), SvfState::at_rest(0.0));
-        let n = libm::ceil(60.0 / wt) as u32 + 200;
-        let mut d = [(0.0, 0.0); 3];
-        for k in 1..=n {
-            let (sn, cs) = libm::sincos(x * f64::from(k));
-            let (r, i) = (re.update(&c, cs), im.update(&c, sn));
-            if k == n {
-                let back = (cs, -sn);
-                d = [
-                    mul((r.f0, i.f0), back),
-                    mul((r.f1, i.f1), back),
-                    mul((r.f2, i.f2), back),
-                ];
-            }
-        }
+        let d = sine_response(w, ts, x);
         let h0 = div((w * w, 0.0), mul((w, om), (w, om)));
         let h1 = mul(h0, (0.0, om));
         let r0 = div((d[0].0 - e0 * d[2].0, d[0].1 - e0 * d[2].1), h0);
@@ -196,6 +185,27 @@ pub fn band_taps(wt: f64) -> [f64; 2] {
         (atb[0] * ata[1][1] - atb[1] * ata[0][1]) / det / e0,
         (ata[0][0] * atb[1] - ata[1][0] * atb[0]) / det / e0,
     ]
+}
+
+/// The FOH-exact filter's outputs `[F0, F1, F2]` (complex, as `(re, im)`) in the steady
+/// state of the sampled `e^{iΩt}`, divided by the input: `x = ΩT` per sample, `w`, `ts` as in
+/// [`SvfCoeffs::new`]. Design time, `f64` (the band taps, `examples/svf_band.rs`).
+pub fn sine_response(w: f64, ts: f64, x: f64) -> [(f64, f64); 3] {
+    let c = SvfCoeffs::<f64>::new(w, ts);
+    let (mut re, mut im) = (SvfState::at_rest(1.0), SvfState::at_rest(0.0));
+    // long enough for the start's transient, e^{−wT·k}, to vanish
+    let n = libm::ceil(60.0 / (w * ts)) as u32 + 200;
+    let mut d = [(0.0, 0.0); 3];
+    for k in 1..=n {
+        let (sn, cs) = libm::sincos(x * f64::from(k));
+        let (r, i) = (re.update(&c, cs), im.update(&c, sn));
+        if k == n {
+            // divided by the last input, e^{i x n}
+            let back = |a: f64, b: f64| (a * cs + b * sn, b * cs - a * sn);
+            d = [back(r.f0, i.f0), back(r.f1, i.f1), back(r.f2, i.f2)];
+        }
+    }
+    d
 }
 
 /// The three scaled outputs of one filtered signal.
@@ -304,15 +314,13 @@ impl<T: Real> CSvfState<T> {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
+    use super::*;
+
     /// The shipped taps are the design at the default `wT` (to 1e-9 relative).
     #[test]
     fn the_shipped_band_taps_are_the_design() {
         let t = band_taps(BAND_WT);
-        std::println!("band taps at wT = {BAND_WT}: {t:?}");
-        for hz in [40.0, 80.0, 100.0, 120.0, 150.0, 180.0, 200.0] {
-            let wt = 2.0 * core::f64::consts::PI * hz / 500.0;
-            std::println!("{hz} Hz: {:?}", band_taps(wt));
-        }
         for j in 0..2 {
             assert!(
                 (BAND_TAPS[j] - t[j]).abs() <= 1e-9 * t[j].abs(),
@@ -320,8 +328,6 @@ mod tests {
             );
         }
     }
-    extern crate std;
-    use super::*;
     use std::vec::Vec;
 
     #[test]

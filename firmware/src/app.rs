@@ -71,7 +71,7 @@
 //! AD9959's **linear sweep mode** (CFTW0 start word, CW1 end word, delta words and ramp
 //! rate) cannot replace the steps: its 8-bit ramp rate (≤ 8.16 µs per step at 125 MHz) and
 //! 0.029 Hz delta resolution make its slowest sweep ≈ 3.6 kHz/s, far above the core's ≈ 680 Hz/s:
-//! it would reach each word within ≈ 25 µs and hold (a staircase again).
+//! it would reach each word within ≈ 0.4 ms of the 2 ms period and hold (a staircase again).
 //!
 //! **The guard.** The core keeps the pump inside the drive's parametric band by itself
 //! (its retune targets stay a margin inside the band, and it never ramps outside). The
@@ -116,18 +116,26 @@ impl<F: FnMut()> IoUpdate for F {
     }
 }
 
-/// IO_UPDATE on an [`embedded_hal::digital::OutputPin`]: high, then low. The AD9959 needs
-/// the pulse high for at least one SYNC_CLK period (SYSCLK/4: 8 ns at 500 MHz), which two
-/// back-to-back GPIO writes of a 168 MHz Cortex-M4 exceed; at the board's 125 MHz (32 ns)
-/// they do not, and the stm32f405 board holds the pin for a set number of cycles instead.
-/// Pin errors are ignored (GPIO writes are infallible on the STM32F4).
+/// IO_UPDATE on an [`embedded_hal::digital::OutputPin`]: high, held `HOLD_NS`, then low.
+/// The AD9959 needs the pulse high for at least one SYNC_CLK period (SYSCLK/4: 32 ns at the
+/// board's 125 MHz), longer than two back-to-back GPIO writes of a 168 MHz Cortex-M4
+/// (`ad9959::io_update_hold_ns`). Pin errors are ignored (GPIO writes are infallible on the
+/// STM32F4). The high time is a constant: a board's delay then folds it to a fixed wait.
 #[derive(Debug)]
-pub struct PinIoUpdate<P>(pub P);
+pub struct PinIoUpdate<P, D, const HOLD_NS: u32> {
+    /// The IO_UPDATE pin.
+    pub pin: P,
+    /// The delay that holds it.
+    pub delay: D,
+}
 
-impl<P: embedded_hal::digital::OutputPin> IoUpdate for PinIoUpdate<P> {
+impl<P: embedded_hal::digital::OutputPin, D: embedded_hal::delay::DelayNs, const HOLD_NS: u32>
+    IoUpdate for PinIoUpdate<P, D, HOLD_NS>
+{
     fn pulse(&mut self) {
-        let _ = self.0.set_high();
-        let _ = self.0.set_low();
+        let _ = self.pin.set_high();
+        self.delay.delay_ns(HOLD_NS);
+        let _ = self.pin.set_low();
     }
 }
 

@@ -43,8 +43,8 @@ use embedded_hal::spi::SpiDevice;
 use embedded_hal_bus::spi::{AtomicDevice, ExclusiveDevice};
 use embedded_hal_bus::util::AtomicCell;
 use paragyro_core::Config;
-use paragyro_firmware::app::{App, Chips, IoUpdate, PumpAmplitude, PumpGuard};
-use paragyro_firmware::drivers::ad9959::Ad9959;
+use paragyro_firmware::app::{App, Chips, IoUpdate, PinIoUpdate, PumpAmplitude, PumpGuard};
+use paragyro_firmware::drivers::ad9959::{self, Ad9959};
 use paragyro_firmware::drivers::ads131m08::{self, Ads131m08};
 use paragyro_firmware::drivers::adxl355::{Adxl355, HighPass, Odr, Range};
 use paragyro_firmware::run::calibration;
@@ -69,26 +69,13 @@ const DRDY_TIMEOUT_CYCLES: u32 = SYSCLK_HZ / 250;
 /// Half a 500 Hz sample period in core cycles: the second IO_UPDATE of the two DDS steps.
 const HALF_PERIOD_CYCLES: u32 = SYSCLK_HZ / 1000;
 
-/// IO_UPDATE's high time, core cycles: the AD9959 takes the pulse on SYNC_CLK (SYSCLK/4,
-/// 32 ns at the board's 125 MHz), longer than two back-to-back GPIO writes; 12 cycles at
-/// 168 MHz are 71 ns.
-const IO_UPDATE_HOLD_CYCLES: u32 = 12;
+/// IO_UPDATE's high time, ns (the AD9959's SYNC_CLK at this board's SYSCLK, with margin).
+const IO_UPDATE_HOLD_NS: u32 = ad9959::io_update_hold_ns(DDS_REF_HZ * DDS_PLL as f64);
 
 /// IO_UPDATE now, or armed for the main loop to pulse half a period after the tick began.
 struct HalfPeriodIo<P> {
-    pin: P,
+    pin: PinIoUpdate<P, CycleDelay, IO_UPDATE_HOLD_NS>,
     armed: bool,
-}
-
-impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
-    /// One pulse, held high [`IO_UPDATE_HOLD_CYCLES`] (pin errors ignored: GPIO writes are
-    /// infallible on the STM32F4).
-    #[inline(never)] // two callers, one copy (flash)
-    fn pulse_held(&mut self) {
-        let _ = self.pin.set_high();
-        cortex_m::asm::delay(IO_UPDATE_HOLD_CYCLES);
-        let _ = self.pin.set_low();
-    }
 }
 
 impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
@@ -98,8 +85,14 @@ impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
     fn finish_period(&mut self, c0: u32) {
         if core::mem::take(&mut self.armed) {
             while DWT::cycle_count().wrapping_sub(c0) < HALF_PERIOD_CYCLES {}
-            self.pulse_held();
+            self.pulse_now();
         }
+    }
+
+    /// One pulse now (two callers, one copy: flash).
+    #[inline(never)]
+    fn pulse_now(&mut self) {
+        self.pin.pulse();
     }
 }
 
@@ -116,7 +109,7 @@ fn board_config() -> Config {
 
 impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
     fn pulse(&mut self) {
-        self.pulse_held();
+        self.pulse_now();
     }
 
     fn pulse_at_half_period(&mut self) -> bool {
@@ -367,7 +360,11 @@ fn main() -> ! {
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
-    let (pin, armed) = (gpiob.pb1.into_push_pull_output(), false);
+    let pin = PinIoUpdate {
+        pin: gpiob.pb1.into_push_pull_output(),
+        delay: CycleDelay,
+    };
+    let armed = false;
     let mut io = HalfPeriodIo { pin, armed };
 
     let mut delay = CycleDelay;

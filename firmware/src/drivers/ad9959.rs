@@ -55,15 +55,31 @@ use embedded_hal::spi::{Operation, SpiDevice};
 /// The board's SYSCLK, Hz: 25 MHz × 5 (the PLL's low VCO range). The pump's word is
 /// 2·f_SYSCLK/2³² = 0.058 Hz, a quarter of 500 MHz's 0.233 Hz: each step of the pump's
 /// frequency kicks the drive's ≈ 100 Hz envelope mode, which the fast rate channel reads
-/// at 75–150 Hz, and at 500 MHz the frequency's words added 0.126 °/s rms and a −0.09 to
-/// −0.17 °/s bias to the rate, at 125 MHz 0.037–0.040 and +0.01 to +0.03
-/// (`cargo run --release -p paragyro-fil --example dds_words`, `rate-step` seeds 1–3). The
+/// at 75–150 Hz: at 500 MHz the frequency's words add 0.066 °/s rms and a −0.09 to
+/// −0.17 °/s bias to the rate, at 125 MHz 0.027–0.031 and +0.01 to +0.03 (0.126 and
+/// 0.037–0.040 before the fast row's band taps; `cargo run --release -p paragyro-fil
+/// --example dds_words`, `rate-step` seeds 1–3). The
 /// pump at ≈ 22 kHz needs nothing of the higher clock.
 pub const DEFAULT_SYSCLK_HZ: f64 = 125e6;
 /// Highest SYSCLK of the part, Hz.
 pub const MAX_SYSCLK_HZ: f64 = 500e6;
 /// `2^32`, the FTW scale.
 pub const FTW_SCALE: f64 = 4_294_967_296.0;
+
+/// How long IO_UPDATE must stay high, ns, for a SYSCLK of `sysclk_hz`: the part takes the
+/// pulse on SYNC_CLK (SYSCLK/4), so one SYNC_CLK period at least (32 ns at the board's
+/// 125 MHz, 8 ns at 500 MHz); two periods, rounded up, for margin. A `const fn`: a board
+/// gets it at compile time.
+pub const fn io_update_hold_ns(sysclk_hz: f64) -> u32 {
+    let ns = 2.0 * 4.0e9 / sysclk_hz;
+    let whole = ns as u32;
+    if (whole as f64) < ns {
+        whole.saturating_add(1)
+    } else {
+        whole
+    }
+}
+
 /// Largest amplitude scale factor (10 bits).
 pub const ASF_MAX: u16 = 1023;
 /// CSR serial-mode bits for single-bit 3-wire mode (`CSR[2:1] = 01`).
@@ -677,5 +693,14 @@ mod tests {
         assert!(!valid_sysclk(500.1e6));
         assert!(!valid_sysclk(0.0));
         assert!(!valid_sysclk(f64::INFINITY));
+    }
+
+    /// IO_UPDATE is held two SYNC_CLK periods (SYSCLK/4), rounded up: 64 ns at the board's
+    /// 125 MHz, 16 ns at 500 MHz, 54 ns at 150 MHz (53.3 rounded up).
+    #[test]
+    fn io_update_is_held_two_sync_clk_periods() {
+        assert_eq!(io_update_hold_ns(DEFAULT_SYSCLK_HZ), 64);
+        assert_eq!(io_update_hold_ns(500e6), 16);
+        assert_eq!(io_update_hold_ns(150e6), 54);
     }
 }
