@@ -79,6 +79,17 @@ struct HalfPeriodIo<P> {
 }
 
 impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
+    /// On the IO_UPDATE pin, nothing armed.
+    fn on(pin: P) -> Self {
+        HalfPeriodIo {
+            pin: PinIoUpdate {
+                pin,
+                delay: CycleDelay,
+            },
+            armed: false,
+        }
+    }
+
     /// The second step: if the tick armed it (its words are buffered in the DDS), waits
     /// until [`HALF_PERIOD_CYCLES`] after `c0` (the tick's start, just after DRDY) and
     /// pulses IO_UPDATE.
@@ -360,12 +371,7 @@ fn main() -> ! {
     let Ok(accel_dev) = ExclusiveDevice::new_no_delay(spi2, gpiob.pb12.into_push_pull_output());
     let Ok(dds_dev) = ExclusiveDevice::new_no_delay(spi3, gpioa.pa15.into_push_pull_output());
     let drdy = gpiob.pb0.into_pull_up_input();
-    let pin = PinIoUpdate {
-        pin: gpiob.pb1.into_push_pull_output(),
-        delay: CycleDelay,
-    };
-    let armed = false;
-    let mut io = HalfPeriodIo { pin, armed };
+    let mut io = HalfPeriodIo::on(gpiob.pb1.into_push_pull_output());
 
     let mut delay = CycleDelay;
     let adc_x = init_adc(adc_x_dev, &mut delay);
