@@ -1,16 +1,15 @@
 //! Wall time of the sim-to-real diagnosis of a 60 s record (target: under 10 s on this
 //! machine), with the re-simulations (the model over the record, the effect over the
 //! held-out span); and of the confirmation by re-simulation of two candidates on a 60 s
-//! record, both rejected ([`slowest_path_record`]; since the early rejection, `hopeless`
-//! in `diagnose::confirm`, each after its first run; a record whose two candidates both
-//! take all their [`CONFIRM_STEPS`] Gauss–Newton steps and are rejected costs four runs
-//! of the record more).
+//! record, both rejected ([`slowest_path_record`]). The second is the longest path there
+//! is: the calibration's two whole-record runs and the confirmation's [`CONFIRM_RUNS`]
+//! (its budget, `Options::confirm_runs`), four runs of the record in all.
 //!
 //! Run: `cargo bench -p paragyro-diagnose --bench diagnose`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use paragyro_diagnose::blind::outside::slowest_path_record;
-use paragyro_diagnose::diagnose::confirm::{CONFIRM_MAX, CONFIRM_STEPS, HOPELESS_UNEXPLAINED};
+use paragyro_diagnose::diagnose::confirm::{CONFIRM_MAX, CONFIRM_RUNS, HOPELESS_UNEXPLAINED};
 use paragyro_diagnose::diagnose::{Options, Report, diagnose};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
@@ -41,10 +40,10 @@ fn bench(c: &mut Criterion) {
 /// the confirmation ran on [`CONFIRM_MAX`] candidates, the force leak then the pump-driven
 /// softening, and rejected both after their first re-simulation (each left more of the gap
 /// than the calibrated model without it, and its first Gauss–Newton step reversed its
-/// size: `diagnose::confirm::hopeless`; without that rule each takes [`CONFIRM_STEPS`]
-/// runs more, six in all), and the verdict stays `unknown`.
+/// size: `diagnose::confirm::hopeless`), the budget's [`CONFIRM_RUNS`] runs spent, and the
+/// verdict stays `unknown`.
 fn assert_slowest_path(r: &Report) {
-    assert_eq!((CONFIRM_MAX, CONFIRM_STEPS), (2, 2));
+    assert_eq!((CONFIRM_MAX, CONFIRM_RUNS), (2, 2));
     for c in &r.confirmation {
         assert_eq!(c.runs.len(), 1, "{c:?}");
         assert!(c.runs[0].unexplained > HOPELESS_UNEXPLAINED, "{c:?}");

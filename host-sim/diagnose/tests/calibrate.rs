@@ -8,13 +8,17 @@
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::calibrate::ParamDeviation;
-use paragyro_diagnose::diagnose::confirm::{CONFIRM_STEPS, HOPELESS_UNEXPLAINED};
+use paragyro_diagnose::diagnose::confirm::{CONFIRM_RUNS, HOPELESS_UNEXPLAINED, Stop};
 use paragyro_diagnose::diagnose::{Options, Report, diagnose};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
 
 fn diagnosed(sc: &Scenario, effects: &[&str], seed: u64) -> Report {
+    diagnosed_with(sc, effects, seed, &Options::default())
+}
+
+fn diagnosed_with(sc: &Scenario, effects: &[&str], seed: u64, o: &Options) -> Report {
     let opts = RecordOptions {
         seed: Some(seed),
         effects: effects.iter().map(|e| e.parse().unwrap()).collect(),
@@ -22,7 +26,7 @@ fn diagnosed(sc: &Scenario, effects: &[&str], seed: u64) -> Report {
         temp: Some((25.0, 4.0)),
     };
     let (rec, _truth) = simulate_record_with(sc, &opts, &mut |_| {}).unwrap();
-    diagnose(&rec, &Options::default()).unwrap().report
+    diagnose(&rec, o).unwrap().report
 }
 
 fn param<'a>(r: &'a Report, name: &str) -> &'a ParamDeviation {
@@ -306,13 +310,18 @@ fn a_device_whose_rows_carry_more_noise_reads_none() {
 /// −36.06 ppm/K, left 61 % of its gap, 4.2e4 × its noise, and stayed `unknown` (blind run
 /// 10's record 61 likewise: 5e5 ×). The steps refit the θ and the size on the gap each run
 /// leaves: the drift is the verdict, re-simulated at −44.9999 ppm/K, 0.03 % of the gap
-/// left (284 × the noise).
+/// left (284 × the noise), when the confirmation may make three runs (`--confirm-runs 3`).
+/// The default budget of two, which bounds the diagnosis's time, leaves it `unknown`.
 #[test]
-fn a_large_thermal_drift_is_confirmed_by_resimulation() {
+fn a_large_thermal_drift_is_confirmed_by_resimulation_given_three_runs() {
     let sc0 = Scenario::load("characterise").unwrap();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(61);
     let sc = DeviceDraw::draw(&mut rng).apply(&sc0);
-    let r = diagnosed(&sc, &["thermal_drift=-45"], 61);
+    let o = Options {
+        confirm_runs: 3,
+        ..Options::default()
+    };
+    let r = diagnosed_with(&sc, &["thermal_drift=-45"], 61, &o);
     assert_eq!(
         r.verdict.to_string(),
         "thermal_drift",
@@ -329,8 +338,15 @@ fn a_large_thermal_drift_is_confirmed_by_resimulation() {
     // every Gauss–Newton step taken, and needed: the first two runs fail the rules (61 %
     // and 86 % of the gap left), the third passes; the steps move the size by a fraction of
     // it (+25 %, −0.3 %), and the early rejection does not stop them
-    assert_eq!(c.runs.len(), 1 + CONFIRM_STEPS, "{:?}", c.runs);
+    assert_eq!(c.runs.len(), 3, "{:?}", c.runs);
     assert!(!c.runs[0].passed && !c.runs[1].passed, "{:?}", c.runs);
+    // the default budget (two runs, the 10 s bound) stops it after the second run, with
+    // the θ still moving: `unknown`, and the report says the budget ended the steps
+    let r = diagnosed(&sc, &["thermal_drift=-45"], 61);
+    assert_eq!(r.verdict.to_string(), "unknown", "{:?}", r.confirmation);
+    let c = r.confirmation.last().expect("re-simulated");
+    assert_eq!(c.runs.len(), CONFIRM_RUNS, "{:?}", c.runs);
+    assert_eq!(c.stopped, Some(Stop::Budget), "{c:?}");
 }
 
 /// The bench's slowest-path record (60 s, a force leak at 7e-4 and a Coulomb friction no

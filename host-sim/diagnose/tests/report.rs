@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
-use paragyro_diagnose::diagnose::confirm::Run;
+use paragyro_diagnose::diagnose::confirm::{Run, Stop};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
 use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT};
 use paragyro_diagnose::diagnose::{
@@ -143,9 +143,25 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
         num(),
         any::<bool>(),
         prop::collection::vec((num(), num(), num(), any::<bool>()), 1..4),
+        prop::option::of(prop_oneof![
+            Just(Stop::Converged),
+            Just(Stop::Hopeless),
+            Just(Stop::Budget)
+        ]),
+        prop::option::of(num()),
     )
         .prop_map(
-            |(effect, unexplained, unexplained_rows, residual_over_noise, nu2, confirmed, runs)| {
+            |(
+                effect,
+                unexplained,
+                unexplained_rows,
+                residual_over_noise,
+                nu2,
+                confirmed,
+                runs,
+                stopped,
+                next_step,
+            )| {
                 Confirmation {
                     effect,
                     unexplained,
@@ -162,6 +178,8 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                             passed,
                         })
                         .collect(),
+                    stopped,
+                    next_step,
                 }
             },
         )

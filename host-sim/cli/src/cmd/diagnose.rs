@@ -24,6 +24,11 @@ pub struct Args {
     /// Skip the re-simulation (no output error, faster).
     #[arg(long)]
     pub no_resim: bool,
+    /// Whole-record re-simulations the confirmation of large effects may make (each about
+    /// a third of the time of a 60 s record's diagnosis; more lets a candidate take more
+    /// Gauss–Newton steps, 0 turns the confirmation off).
+    #[arg(long, value_name = "N", default_value_t = paragyro_diagnose::diagnose::confirm::CONFIRM_RUNS)]
+    pub confirm_runs: usize,
 }
 
 /// Diagnoses the record, writes the report, prints the verdict and the top candidates.
@@ -32,6 +37,7 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     let rec = read_record_warn(file)?;
     let mut opts = Options {
         resimulate: !a.no_resim,
+        confirm_runs: a.confirm_runs,
         ..Default::default()
     };
     if let Some(m) = &a.model {

@@ -46,7 +46,7 @@ fn confirmation(s: &mut String, r: &Report) {
         return;
     }
     s.push_str(&format!(
-        "\n\nThe linear test left the verdict `unknown`; re-simulated at their fitted sizes (at most {:.0} % of the gap above the noise may be left, or the residual at most {:.1} × the record's noise, each row at its own noise level):\n\n| effect | gap above the noise left | rows left | residual / noise | confirmed |\n|---|---|---|---|---|\n",
+        "\n\nThe linear test left the verdict `unknown`; re-simulated at their fitted sizes (at most {:.0} % of the gap above the noise may be left, or the residual at most {:.1} × the record's noise, each row at its own noise level):\n\n| effect | gap above the noise left | rows left | residual / noise | runs | steps ended | confirmed |\n|---|---|---|---|---|---|---|\n",
         100.0 * UNEXPLAINED_MAX,
         NONE_NOISE_MAX
     ));
@@ -57,7 +57,7 @@ fn confirmation(s: &mut String, r: &Report) {
             .filter_map(|&i| super::ROW_LABELS.get(i).copied())
             .collect();
         s.push_str(&format!(
-            "| `{}` | {:.1} % | {} | {} | {} |\n",
+            "| `{}` | {:.1} % | {} | {} | {} | {} | {} |\n",
             c.effect,
             100.0 * c.unexplained,
             if rows.is_empty() {
@@ -66,8 +66,19 @@ fn confirmation(s: &mut String, r: &Report) {
                 rows.join(", ")
             },
             g4(c.residual_over_noise),
+            c.runs.len(),
+            stop_text(c),
             if c.confirmed { "yes" } else { "no" }
         ));
+    }
+}
+
+/// Why a candidate's Gauss–Newton steps ended, with the step not taken.
+fn stop_text(c: &super::confirm::Confirmation) -> String {
+    match (c.stopped, c.next_step) {
+        (Some(st), Some(d)) => format!("{st} (next step {:+.2} %)", 100.0 * d),
+        (Some(st), None) => st.to_string(),
+        (None, _) => "–".into(),
     }
 }
 

@@ -252,6 +252,9 @@ pub struct Options {
     pub resimulate: bool,
     /// RK4 steps per carrier period of the re-run.
     pub steps_per_period: usize,
+    /// Whole-record re-simulations the confirmation may make in all
+    /// ([`confirm::CONFIRM_RUNS`] by default: the bound on the diagnosis's time).
+    pub confirm_runs: usize,
 }
 
 impl Default for Options {
@@ -260,6 +263,7 @@ impl Default for Options {
             model: Model::table2(),
             resimulate: true,
             steps_per_period: 128,
+            confirm_runs: confirm::CONFIRM_RUNS,
         }
     }
 }
