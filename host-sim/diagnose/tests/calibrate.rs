@@ -9,7 +9,7 @@ use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::calibrate::ParamDeviation;
 use paragyro_diagnose::diagnose::confirm::{CONFIRM_RUNS, HOPELESS_UNEXPLAINED, Stop};
-use paragyro_diagnose::diagnose::{Options, Report, diagnose};
+use paragyro_diagnose::diagnose::{Options, Report, SHARE_MIN, T_SIG, diagnose};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
@@ -375,4 +375,47 @@ fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
         assert_eq!(c.runs.len(), 1, "{c:?}");
         assert!(c.unexplained > HOPELESS_UNEXPLAINED, "{c:?}");
     }
+}
+
+/// A large geometric nonlinearity (−5e-6, 50× its detection limit; blind run 13's one
+/// top-1 miss was one at 50.5×) on a toleranced device: its linear column about a
+/// calibration that absorbed part of it fits its size within 0.04 % (|size|/σ ≈ 1 300) yet
+/// extrapolates badly to the held-out span (its held-out closure negative), so it is not
+/// among the candidates that close [`SHARE_MIN`] of the explainable gap. The one that does,
+/// a thermal drift, is re-simulated first and rejected; the confirmation's second place
+/// then goes to the most significant of the rest, the nonlinearity, whose run brings the
+/// record to its noise. Before, it read `unknown` (the thermal drift alone re-simulated).
+#[test]
+fn a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation() {
+    let sc0 = Scenario::load("characterise").unwrap();
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(300);
+    let sc = DeviceDraw::draw(&mut rng).apply(&sc0);
+    let r = diagnosed(&sc, &["geometric_nonlinearity=-5e-6"], 21);
+    let gn = r
+        .ranking
+        .iter()
+        .find(|c| c.effect.to_string() == "geometric_nonlinearity")
+        .unwrap();
+    let (size, sd) = (gn.size.unwrap(), gn.size_sigma.unwrap());
+    println!(
+        "linear: {size:e} ± {sd:e}, held-out closure {:.3}",
+        gn.gap_closure
+    );
+    // what the case is: significant, but short of the share the first picks need
+    assert!(
+        size.abs() / sd >= T_SIG && gn.gap_closure < SHARE_MIN,
+        "{gn:?}"
+    );
+    let tested: Vec<&str> = r
+        .confirmation
+        .iter()
+        .map(|c| c.effect.split('=').next().unwrap_or(""))
+        .collect();
+    assert_eq!(tested, ["thermal_drift", "geometric_nonlinearity"]);
+    assert!(!r.confirmation[0].confirmed, "{:?}", r.confirmation[0]);
+    let c = &r.confirmation[1];
+    assert!(c.confirmed && c.residual_over_noise < 1.1, "{c:?}");
+    assert_eq!(r.verdict.to_string(), "geometric_nonlinearity");
+    let fitted: f64 = c.effect["geometric_nonlinearity=".len()..].parse().unwrap();
+    assert!((fitted + 5e-6).abs() < 0.01 * 5e-6, "{fitted}");
 }
