@@ -261,8 +261,42 @@ pub(crate) fn face(
 /// A deviation as "wy2 +0.100 % ± 0.002 %" (relative) or "gamma_p +1.2e-7 ± 3e-9".
 pub fn describe(p: &ParamDeviation) -> String {
     match (p.relative, p.relative_sigma) {
-        (Some(r), Some(s)) => format!("{} {:+.3} % ± {:.3} %", p.name, 100.0 * r, 100.0 * s),
+        (Some(r), Some(s)) => format!("{} {}", p.name, percent_pm(r, s)),
         _ => format!("{} {:+.3e} ± {:.1e}", p.name, p.device - p.model, p.sigma),
+    }
+}
+
+/// A relative deviation and its σ in percent, with the decimals that show σ to two
+/// significant digits (at least 3, at most 9): `+0.0973871 % ± 0.0000011 %`, not
+/// `+0.097 % ± 0.000 %`.
+pub fn percent_pm(rel: f64, rel_sigma: f64) -> String {
+    let (r, s) = (100.0 * rel, 100.0 * rel_sigma);
+    let dec = if s > 0.0 && s.is_finite() {
+        (1.0 - s.log10().floor()).clamp(3.0, 9.0) as usize
+    } else {
+        3
+    };
+    format!("{r:+.dec$} % ± {s:.dec$} %")
+}
+
+/// `v` with the significant digits its σ warrants (σ to two digits; 4 to 10 digits),
+/// fixed-point between 1e-2 and 1e5, else scientific.
+pub fn value_to_sigma(v: f64, sigma: f64) -> String {
+    if !v.is_finite() || v == 0.0 {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor();
+    let digits = if sigma > 0.0 && sigma.is_finite() {
+        (mag - sigma.log10().floor() + 2.0).clamp(4.0, 10.0)
+    } else {
+        4.0
+    };
+    if (1e-2..1e5).contains(&v.abs()) {
+        let dec = (digits - 1.0 - mag).max(0.0) as usize;
+        format!("{v:.dec$}")
+    } else {
+        let dec = (digits - 1.0) as usize;
+        format!("{v:.dec$e}")
     }
 }
 
@@ -393,4 +427,36 @@ fn hypotheses(
         },
     });
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{percent_pm, value_to_sigma};
+
+    #[test]
+    fn a_deviation_shows_its_sigma_to_two_digits() {
+        // ωy² +0.1 % found to 1e-8 (docs/diagnosis.md, example 1): not "± 0.000 %"
+        assert_eq!(
+            percent_pm(9.73871e-4, 1.12e-8),
+            "+0.0973871 % ± 0.0000011 %"
+        );
+        assert_eq!(percent_pm(0.20012, 3.8e-4), "+20.012 % ± 0.038 %");
+        // at least three decimals, at most nine, and a σ that is not a number
+        assert_eq!(percent_pm(0.05, 0.2), "+5.000 % ± 20.000 %");
+        assert_eq!(percent_pm(1e-3, 1e-14), "+0.100000000 % ± 0.000000000 %");
+        assert_eq!(percent_pm(1e-3, f64::NAN), "+0.100 % ± NaN %");
+    }
+
+    #[test]
+    fn a_value_shows_the_digits_its_sigma_warrants() {
+        assert_eq!(value_to_sigma(1.027500006, 1.15e-8), "1.027500006");
+        assert_eq!(value_to_sigma(1.0265, 1.15e-8), "1.026500000");
+        assert_eq!(value_to_sigma(1.0600216e-3, 5.3e-8), "1.060022e-3");
+        assert_eq!(value_to_sigma(0.0226002, 2.7e-7), "0.02260020");
+        assert_eq!(value_to_sigma(6.0852e-5, 6.6e-8), "6.0852e-5");
+        assert_eq!(value_to_sigma(6.0852e-5, 6.6e-7), "6.085e-5");
+        assert_eq!(value_to_sigma(0.0, 1.0), "0");
+        // σ not positive: four digits
+        assert_eq!(value_to_sigma(2.5204, 0.0), "2.520");
+    }
 }

@@ -1,5 +1,6 @@
 //! report.md: the report in words and tables, from the typed [`Report`].
 
+use super::calibrate::{percent_pm, value_to_sigma};
 use super::report::Report;
 use super::verdict::Answer;
 use super::{GAP_MIN, GUARD_S, NONE_NOISE_MAX, SHARE_MIN, T_SIG, UNEXPLAINED_MAX};
@@ -22,14 +23,14 @@ fn parameter_face(s: &mut String, r: &Report) {
     ));
     for p in &f.parameters {
         let dev = match (p.relative, p.relative_sigma) {
-            (Some(a), Some(b)) => format!("{:+.4} % ± {:.4} %", 100.0 * a, 100.0 * b),
+            (Some(a), Some(b)) => percent_pm(a, b),
             _ => format!("{:+.3e}", p.device - p.model),
         };
         s.push_str(&format!(
             "| {} | {} | {} | {:.2e} | {dev} | {:+.1} |\n",
             p.name,
-            g4(p.model),
-            g4(p.device),
+            value_to_sigma(p.model, p.sigma),
+            value_to_sigma(p.device, p.sigma),
             p.sigma,
             p.t
         ));
