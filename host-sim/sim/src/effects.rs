@@ -306,8 +306,16 @@ pub struct EffectSpec {
 }
 
 impl fmt::Display for EffectSpec {
+    /// `NAME=SIZE[@PARAM]`, the size exact (it parses back to the same `f64`): plain between
+    /// 1e-3 and 1e5 (`angular_vibration=26.92@1.5`), else in exponent form
+    /// (`nonlinear_damping=9.900176026541055e-7`, not `0.0000009900176026541055`).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}={}", self.effect, self.size)?;
+        let a = self.size.abs();
+        if a == 0.0 || (1e-3..1e5).contains(&a) || !a.is_finite() {
+            write!(f, "{}={}", self.effect, self.size)?;
+        } else {
+            write!(f, "{}={:e}", self.effect, self.size)?;
+        }
         if let Some(p) = self.param {
             write!(f, "@{p}")?;
         }
@@ -503,6 +511,27 @@ mod tests {
             serde_json::json!({"name": "angular_vibration", "size": 20.0, "param": 2.5})
         );
         assert_eq!(serde_json::from_value::<EffectSpec>(j).unwrap(), spec);
+    }
+
+    #[test]
+    fn a_spec_prints_its_exact_size_readably() {
+        for (text, shown) in [
+            (
+                "nonlinear_damping=9.900176026541055e-7",
+                "nonlinear_damping=9.900176026541055e-7",
+            ),
+            (
+                "nonlinear_damping=0.0000009900176026541055",
+                "nonlinear_damping=9.900176026541055e-7",
+            ),
+            ("angular_vibration=26.92@1.5", "angular_vibration=26.92@1.5"),
+            ("thermal_drift=-45", "thermal_drift=-45"),
+            ("feedthrough=1e-4", "feedthrough=1e-4"),
+        ] {
+            let spec: EffectSpec = text.parse().unwrap();
+            assert_eq!(spec.to_string(), shown);
+            assert_eq!(shown.parse::<EffectSpec>(), Ok(spec));
+        }
     }
 
     #[test]

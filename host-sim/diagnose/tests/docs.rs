@@ -1,0 +1,108 @@
+//! The worked examples of `host-sim/diagnose/docs/diagnosis.md`, from its scenario files in
+//! `docs/examples/`, recorded and diagnosed as the page's commands do (`paragyro-sim record
+//! FILE --rate-table --temp 25:4 --seed 21 [--effect …]`, then `paragyro-sim diagnose`):
+//! the verdicts and the figures the page quotes.
+
+use paragyro_diagnose::diagnose::calibrate::{ParamDeviation, T_PARAM};
+use paragyro_diagnose::diagnose::{Options, Report, diagnose};
+use paragyro_simulator::record::{RecordOptions, simulate_record_with};
+use paragyro_simulator::scenario::Scenario;
+
+fn example(file: &str, effects: &[&str]) -> (Scenario, Report) {
+    let path = format!("{}/docs/examples/{file}", env!("CARGO_MANIFEST_DIR"));
+    let sc = Scenario::load(&path).unwrap();
+    let opts = RecordOptions {
+        seed: Some(21),
+        effects: effects.iter().map(|e| e.parse().unwrap()).collect(),
+        rate_table: true,
+        temp: Some((25.0, 4.0)),
+    };
+    let (rec, _truth) = simulate_record_with(&sc, &opts, &mut |_| {}).unwrap();
+    let r = diagnose(&rec, &Options::default()).unwrap().report;
+    (sc, r)
+}
+
+fn param<'a>(r: &'a Report, name: &str) -> &'a ParamDeviation {
+    r.parameter_face
+        .parameters
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap()
+}
+
+/// The device's ten parameters, as the scenario file sets them.
+fn truth(sc: &Scenario) -> [(&'static str, f64); 10] {
+    let p = &sc.plant;
+    [
+        ("mu_x", p.mu_x),
+        ("mu_y", p.mu_y),
+        ("mu_xy", p.mu_xy),
+        ("wx2", p.wx2),
+        ("wy2", p.wy2),
+        ("wxy2", p.wxy2),
+        ("alpha_x", p.alpha_x),
+        ("alpha_y", p.alpha_y),
+        ("beta1", p.beta1),
+        ("beta3", p.beta3),
+    ]
+}
+
+/// z of each of the ten against the truth.
+fn z_of(sc: &Scenario, r: &Report) -> Vec<(&'static str, f64)> {
+    truth(sc)
+        .iter()
+        .map(|&(n, v)| {
+            let p = param(r, n);
+            (n, (p.device - v) / p.sigma)
+        })
+        .collect()
+}
+
+#[test]
+fn docs_examples_read_as_documented() {
+    // example 1: ωy² +0.1 %, `none`, ωy² the one deviation at 3σ, found within 2σ
+    let (sc, r) = example("dev-wy2.toml", &[]);
+    assert_eq!(r.verdict.to_string(), "none");
+    let z = z_of(&sc, &r);
+    println!("dev-wy2: {z:?}, residual {:.3}", r.residual_over_noise);
+    assert!(z.iter().all(|(_, z)| z.abs() < 2.0), "{z:?}");
+    let at3: Vec<&str> = r
+        .parameter_face
+        .parameters
+        .iter()
+        .filter(|p| p.t.abs() >= T_PARAM)
+        .map(|p| p.name.as_str())
+        .collect();
+    assert_eq!(at3, ["wy2"]);
+    let es = r
+        .parameter_face
+        .hypotheses
+        .iter()
+        .find(|h| h.name == "electrostatic_softening")
+        .unwrap();
+    assert_eq!(es.status, "rejected", "{es:?}");
+    assert!(r.residual_over_noise < 1.1, "{}", r.residual_over_noise);
+
+    // example 2: a toleranced device with nonlinear damping 1e-6: named, within 3σ, the
+    // output error mostly closed; the ten tolerances found (within 3σ of the truth)
+    let (sc, r) = example("dev-toleranced.toml", &["nonlinear_damping=1e-6"]);
+    assert_eq!(r.verdict.to_string(), "nonlinear_damping");
+    let c = &r.ranking[0];
+    let (size, sd) = (c.size.unwrap(), c.size_sigma.unwrap());
+    println!(
+        "dev-nld: {size:e} ± {sd:e}, residual {:.1}",
+        r.residual_over_noise
+    );
+    assert!((size - 1e-6).abs() < 3.0 * sd, "{size} ± {sd}");
+    assert!(r.residual_over_noise > 10.0, "{}", r.residual_over_noise);
+    let oe = r.output_error.as_ref().unwrap();
+    assert!(oe.closure > 0.9, "{}", oe.closure);
+    let z = z_of(&sc, &r);
+    println!("dev-nld: {z:?}");
+    assert!(z.iter().all(|(_, z)| z.abs() < 3.0), "{z:?}");
+
+    // the same device without the effect: `none`, at its noise
+    let (_, r) = example("dev-toleranced.toml", &[]);
+    assert_eq!(r.verdict.to_string(), "none");
+    assert!(r.residual_over_noise < 1.1, "{}", r.residual_over_noise);
+}
