@@ -30,11 +30,7 @@ fn diagnosed_with(sc: &Scenario, effects: &[&str], seed: u64, o: &Options) -> Re
 }
 
 fn param<'a>(r: &'a Report, name: &str) -> &'a ParamDeviation {
-    r.parameter_face
-        .parameters
-        .iter()
-        .find(|p| p.name == name)
-        .unwrap()
+    r.parameter_face.parameter(name).unwrap()
 }
 
 /// The calibrated value within `k`σ of `truth`.

@@ -3,7 +3,7 @@
 //! FILE --rate-table --temp 25:4 --seed 21 [--effect …]`, then `paragyro-sim diagnose`):
 //! the verdicts and the figures the page quotes.
 
-use paragyro_diagnose::diagnose::calibrate::{ParamDeviation, T_PARAM};
+use paragyro_diagnose::diagnose::calibrate::T_PARAM;
 use paragyro_diagnose::diagnose::{Options, Report, diagnose};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
@@ -20,14 +20,6 @@ fn example(file: &str, effects: &[&str]) -> (Scenario, Report) {
     let (rec, _truth) = simulate_record_with(&sc, &opts, &mut |_| {}).unwrap();
     let r = diagnose(&rec, &Options::default()).unwrap().report;
     (sc, r)
-}
-
-fn param<'a>(r: &'a Report, name: &str) -> &'a ParamDeviation {
-    r.parameter_face
-        .parameters
-        .iter()
-        .find(|p| p.name == name)
-        .unwrap()
 }
 
 /// The device's ten parameters, as the scenario file sets them.
@@ -52,7 +44,7 @@ fn z_of(sc: &Scenario, r: &Report) -> Vec<(&'static str, f64)> {
     truth(sc)
         .iter()
         .map(|&(n, v)| {
-            let p = param(r, n);
+            let p = r.parameter_face.parameter(n).unwrap();
             (n, (p.device - v) / p.sigma)
         })
         .collect()

@@ -111,6 +111,13 @@ pub struct ParameterFace {
     pub resimulations: usize,
 }
 
+impl ParameterFace {
+    /// The calibrated parameter `name` (`wy2`, `mu_x`, … as in [`ParamDeviation::name`]).
+    pub fn parameter(&self, name: &str) -> Option<&ParamDeviation> {
+        self.parameters.iter().find(|p| p.name == name)
+    }
+}
+
 /// The θ fit on a gap: `Δθ` (14) and its covariance (14 × 14, row-major).
 pub(crate) struct ThetaFit {
     pub dtheta: [f64; 14],
