@@ -3,8 +3,9 @@
 //! FILE --rate-table --temp 25:4 --seed 21 [--effect …]`, then `paragyro-sim diagnose`):
 //! the verdicts and the figures the page quotes.
 
+use paragyro_core::physics::PHYSICAL_NAMES;
 use paragyro_diagnose::diagnose::calibrate::T_PARAM;
-use paragyro_diagnose::diagnose::{Options, Report, diagnose};
+use paragyro_diagnose::diagnose::{Model, Options, Report, diagnose};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 
@@ -22,28 +23,13 @@ fn example(file: &str, effects: &[&str]) -> (Scenario, Report) {
     (sc, r)
 }
 
-/// The device's ten parameters, as the scenario file sets them.
-fn truth(sc: &Scenario) -> [(&'static str, f64); 10] {
-    let p = &sc.plant;
-    [
-        ("mu_x", p.mu_x),
-        ("mu_y", p.mu_y),
-        ("mu_xy", p.mu_xy),
-        ("wx2", p.wx2),
-        ("wy2", p.wy2),
-        ("wxy2", p.wxy2),
-        ("alpha_x", p.alpha_x),
-        ("alpha_y", p.alpha_y),
-        ("beta1", p.beta1),
-        ("beta3", p.beta3),
-    ]
-}
-
-/// z of each of the ten against the truth.
+/// z of each of the device's ten parameters (the scenario file's plant) against the truth.
 fn z_of(sc: &Scenario, r: &Report) -> Vec<(&'static str, f64)> {
-    truth(sc)
+    let truth = Model::from_scenario(sc).phys.as_array();
+    PHYSICAL_NAMES[..10]
         .iter()
-        .map(|&(n, v)| {
+        .zip(truth)
+        .map(|(&n, v)| {
             let p = r.parameter_face.parameter(n).unwrap();
             (n, (p.device - v) / p.sigma)
         })
