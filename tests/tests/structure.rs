@@ -33,6 +33,7 @@ fn sources() -> Vec<PathBuf> {
         "host-sim/diagnose/src",
         "host-sim/papers/src",
         "host-sim/fw-replay/src",
+        "host-sim/fil/src",
         "host-sim/cli/src",
         "tests/src",
         "tests/xtask/src",

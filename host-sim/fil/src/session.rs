@@ -20,7 +20,7 @@ use paragyro_firmware::table::{config_slots, control};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use paragyro_simulator::runner;
-use paragyro_simulator::scenario::{EventKind, L0_M, PumpProfileSpec, Scenario};
+use paragyro_simulator::scenario::{EventKind, L0_M, PlantAt, PumpProfileSpec, Scenario};
 
 use crate::chips::{Dds, Faults, SensorChips};
 
@@ -406,21 +406,11 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
     );
 
     let seed = opts.seed.unwrap_or(sc.seed);
-    let f0 = sc.sim.f0_hz;
     let w0 = sc.omega0_rad_s();
     let fs = cfg.fs_hz;
     // two steps per sample: the plant advances in half intervals, each with its pump
     let halves = if opts.pump.half_steps() { 2 } else { 1 };
-    let simcfg = SimConfig {
-        omega0_rad_s: w0,
-        fs_hz: fs * f64::from(halves),
-        steps_per_period: sc.sim.steps_per_period,
-        omega_max: (cfg.pump_centre_hz + GUARD_HALF_WIDTH_HZ) / (2.0 * f0) * 1.01,
-        lpf_order: sc.sim.lockin_lpf_order,
-        lpf_hz: sc.sim.lockin_lpf_hz,
-        noise_density: sc.sim.noise_pm_rthz * 1e-6,
-        seed,
-    };
+    let simcfg = sim_config(sc, &cfg, halves, seed);
     let x0 = [sc.plant.initial_x_um, 0.0, sc.plant.initial_y_um, 0.0];
     let mut sim = GyroSim::new(&simcfg, x0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
     let n = (sc.duration_s * fs).round() as u64;
@@ -479,35 +469,81 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         if k == n {
             break;
         }
-        // the DDS steps at IO_UPDATE and holds: the plant sees the new word over the
-        // whole interval (a staircase), or with two steps the first word over the first
-        // half and the second over the second (the first pulse's delay after DRDY, the
-        // tick's length, is not modelled)
-        let pa1 = sc.plant_at(t_next);
-        let theta = Theta {
-            drive: pa.theta_drive,
-            sense: pa.theta_sense,
-        };
-        let full = f64::from(AMPLITUDE.full_scale) * sc.pump_scale_at(t_next);
-        let second = (dds.pump_hz(), dds.pump_word_scale());
-        let input = |(hz, word_scale): (f64, f64), ax: f64, ay: f64| PlantInputs {
-            omega: hz / (2.0 * f0),
-            s: word_scale * full,
-            ax,
-            ay,
-        };
-        let (u0, u1) = (
-            input(second, pa.accel_x, pa.accel_y),
-            input(second, pa1.accel_x, pa1.accel_y),
-        );
-        if opts.pump.half_steps() {
-            let first = input(first_half.unwrap_or(second), 0.0, 0.0);
-            let first = (first.omega, first.s);
-            runner::advance_in_halves(&mut sim, &theta, &u0, &u1, first, (u1.omega, u1.s));
-        } else {
-            sim.advance(&theta, &u0, &u1);
-        }
+        advance_plant(opts, &mut sim, &dds, &pa, t_next, first_half);
     }
+    let (end, exit_code, instructions) = finish(&mut q, opts)?;
+    Ok(Session {
+        rows,
+        end,
+        instructions,
+        pulses,
+        half_period_pulses: half_pulses,
+        dds_writes: dds.writes,
+        unlocked_ticks: unlocked,
+        exit_code,
+    })
+}
+
+/// The simulator's configuration for a session: `halves` plant steps per sample.
+fn sim_config(sc: &Scenario, cfg: &paragyro_core::Config, halves: u32, seed: u64) -> SimConfig {
+    let f0 = sc.sim.f0_hz;
+    SimConfig {
+        omega0_rad_s: sc.omega0_rad_s(),
+        fs_hz: cfg.fs_hz * f64::from(halves),
+        steps_per_period: sc.sim.steps_per_period,
+        omega_max: (cfg.pump_centre_hz + GUARD_HALF_WIDTH_HZ) / (2.0 * f0) * 1.01,
+        lpf_order: sc.sim.lockin_lpf_order,
+        lpf_hz: sc.sim.lockin_lpf_hz,
+        noise_density: sc.sim.noise_pm_rthz * 1e-6,
+        seed,
+    }
+}
+
+/// Advances the plant over one sample interval from `pa` (the plant at its start) to
+/// `t_next` under the DDS's words.
+fn advance_plant(
+    opts: &Options,
+    sim: &mut GyroSim,
+    dds: &Dds,
+    pa: &PlantAt,
+    t_next: f64,
+    first_half: Option<(f64, f64)>,
+) {
+    let sc = &opts.scenario;
+    let f0 = sc.sim.f0_hz;
+    // the DDS steps at IO_UPDATE and holds: the plant sees the new word over the
+    // whole interval (a staircase), or with two steps the first word over the first
+    // half and the second over the second (the first pulse's delay after DRDY, the
+    // tick's length, is not modelled)
+    let pa1 = sc.plant_at(t_next);
+    let theta = Theta {
+        drive: pa.theta_drive,
+        sense: pa.theta_sense,
+    };
+    let full = f64::from(AMPLITUDE.full_scale) * sc.pump_scale_at(t_next);
+    let second = (dds.pump_hz(), dds.pump_word_scale());
+    let input = |(hz, word_scale): (f64, f64), ax: f64, ay: f64| PlantInputs {
+        omega: hz / (2.0 * f0),
+        s: word_scale * full,
+        ax,
+        ay,
+    };
+    let (u0, u1) = (
+        input(second, pa.accel_x, pa.accel_y),
+        input(second, pa1.accel_x, pa1.accel_y),
+    );
+    if opts.pump.half_steps() {
+        let first = input(first_half.unwrap_or(second), 0.0, 0.0);
+        let first = (first.omega, first.s);
+        runner::advance_in_halves(sim, &theta, &u0, &u1, first, (u1.omega, u1.s));
+    } else {
+        sim.advance(&theta, &u0, &u1);
+    }
+}
+
+/// Sends the end message, waits for QEMU to exit and reads the plugin's instruction
+/// counts: the end answer, QEMU's exit code, the instructions per tick.
+fn finish(q: &mut Qemu, opts: &Options) -> anyhow::Result<(FromFw, Option<i32>, Vec<u64>)> {
     let end_msg = ToFw {
         tick: u32::MAX,
         flags: flag::END,
@@ -537,14 +573,5 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
         .map(|l| l.trim().parse::<u64>())
         .collect::<Result<Vec<_>, _>>()
         .context("tickcount.txt")?;
-    Ok(Session {
-        rows,
-        end,
-        instructions,
-        pulses,
-        half_period_pulses: half_pulses,
-        dds_writes: dds.writes,
-        unlocked_ticks: unlocked,
-        exit_code,
-    })
+    Ok((end, exit_code, instructions))
 }

@@ -9,6 +9,7 @@ use paragyro_simulator::runner;
 use paragyro_simulator::scenario::{EventKind, PlantParam, Scenario};
 use serde::{Deserialize, Serialize};
 
+use crate::chips::Faults;
 use crate::session::{BoardPump, Session};
 use crate::{LoopScenario, RampLeg};
 
@@ -593,12 +594,101 @@ pub fn summarize(
     } else {
         WY2_FIL_VS_HOST_OF_DRIFT * wy2_tol / WY2_TOL_OF_DRIFT
     };
+    let rate_est = end.rate_dps;
+    let rate_true = s.rows.last().map_or(f64::NAN, |r| r.rate_dps_true);
     let mut failures = Vec::new();
+    loop_checks(
+        &mut failures,
+        &LoopFacts {
+            expect,
+            converged,
+            wy2: (wy2_est, wy2_true, wy2_tol),
+            vs_host: (vs_host, vs_host_tol),
+            ratio,
+            bad,
+            rate: (rate_est, rate_true),
+        },
+        s,
+        &host,
+    );
+    let ramp = ramp_checks(&mut failures, leg, s);
+    let (dds_fault_ticks, adc_fault_ticks) = fault_checks(&mut failures, faults, s);
+    Summary {
+        scenario: sc.name.clone(),
+        seed,
+        core_pump_profile: format!("{:?}", pump.core_profile()),
+        board_pump: pump.name().to_string(),
+        converged,
+        retunes: c[9],
+        sense_amp_ratio: ratio,
+        drive_amp_ratio: drive_ratio,
+        ticks: s.rows.len() as u32,
+        bad_ticks: bad,
+        instr_mean,
+        stack_peak_bytes: end.stack_peak,
+        instr_max: imax,
+        instr_max_tick: imax_k,
+        systick_mean_with_shims: systick_mean,
+        wy2_est,
+        wy2_true,
+        wy2_tol,
+        pump_end_hz: s.rows.last().map_or(f64::NAN, |r| r.dds_pump_hz),
+        io_update_pulses: s.pulses,
+        half_period_pulses: s.half_period_pulses,
+        dds_writes: s.dds_writes,
+        dds_unlocked_ticks: s.unlocked_ticks,
+        fw_counters: fw_counts(&c),
+        dds_fault_ticks,
+        adc_fault_ticks,
+        rate_dps_est: rate_est,
+        rate_dps_mean_last_s: mean_last_s(sc, s.rows.iter().map(|r| (r.t_s, r.fw.rate_dps))),
+        rate_dps_true: rate_true,
+        health_end: s.rows.last().map_or(0, |r| r.fw.health),
+        ramp,
+        rate_error: RateError::of(
+            sc,
+            &s.rows
+                .iter()
+                .map(|r| (r.t_s, r.rate_dps_true, r.fw.rate_dps))
+                .collect::<Vec<_>>(),
+            Some(&host.rates),
+        ),
+        exit_code: s.exit_code,
+        host_only: host,
+        wy2_fil_vs_host: vs_host,
+        wy2_fil_vs_host_tol: vs_host_tol,
+        pass: failures.is_empty(),
+        failures,
+    }
+}
+
+/// The numbers [`loop_checks`] judges, computed by [`summarize`].
+struct LoopFacts {
+    expect: Expect,
+    converged: bool,
+    /// ω̂y² at the end, the true ωy², the tolerance.
+    wy2: (f64, f64, f64),
+    /// |ω̂y²(FIL) − ω̂y²(host)| and its tolerance.
+    vs_host: (f64, f64),
+    /// Sense amplitude after the retune / before the drift.
+    ratio: f64,
+    bad: u32,
+    /// The rate estimate at the end and the true rate, °/s.
+    rate: (f64, f64),
+}
+
+/// The loop's own checks and those against the host-only loop; failures appended.
+fn loop_checks(failures: &mut Vec<String>, f: &LoopFacts, s: &Session, host: &LoopNumbers) {
     let mut check = |ok: bool, what: String| {
         if !ok {
             failures.push(what);
         }
     };
+    let (expect, converged, ratio, bad) = (f.expect, f.converged, f.ratio, f.bad);
+    let (wy2_est, wy2_true, wy2_tol) = f.wy2;
+    let (vs_host, vs_host_tol) = f.vs_host;
+    let (rate_est, rate_true) = f.rate;
+    let c = s.end.counters;
     check(
         converged,
         format!("ω̂y² {wy2_est} vs {wy2_true} (tolerance {wy2_tol:.3e})"),
@@ -647,8 +737,6 @@ pub fn summarize(
             "the host-only loop did not retune".into(),
         );
     }
-    let rate_est = end.rate_dps;
-    let rate_true = s.rows.last().map_or(f64::NAN, |r| r.rate_dps_true);
     if expect.rate {
         let tol = RATE_TOL_FRAC * rate_true.abs();
         check(
@@ -665,6 +753,10 @@ pub fn summarize(
             host.rate_dps_est
         ),
     );
+}
+
+/// The ramp leg's fit (scale factor, nonlinearity) and its checks; failures appended.
+fn ramp_checks(failures: &mut Vec<String>, leg: Option<RampLeg>, s: &Session) -> Option<RampFit> {
     let rows = s
         .rows
         .iter()
@@ -672,11 +764,16 @@ pub fn summarize(
     let ramp = match leg_fit(leg, rows) {
         Ok(fit) => fit,
         Err(e) => {
-            check(false, format!("the ramp leg: {e}"));
+            failures.push(format!("the ramp leg: {e}"));
             None
         }
     };
     if let Some(f) = ramp {
+        let mut check = |ok: bool, what: String| {
+            if !ok {
+                failures.push(what);
+            }
+        };
         check(
             f.scale_factor_err_ppm.abs() <= SCALE_FACTOR_MAX_PPM,
             format!(
@@ -692,11 +789,22 @@ pub fn summarize(
             ),
         );
     }
+    ramp
+}
+
+/// Every injected fault flagged and counted, none elsewhere; failures appended. Returns the
+/// ticks with a DDS fault and those with a lost ADC frame.
+fn fault_checks(failures: &mut Vec<String>, faults: &Faults, s: &Session) -> (u32, u32) {
+    let mut check = |ok: bool, what: String| {
+        if !ok {
+            failures.push(what);
+        }
+    };
+    let c = s.end.counters;
     let fault = |bit: u8| s.rows.iter().filter(move |r| r.fw.faults & bit != 0);
     use paragyro_firmware::app::fault;
     let dds_fault_ticks = fault(fault::DDS).count() as u32;
     let adc_fault_ticks = fault(fault::ADC_X | fault::ADC_Y).count() as u32;
-    // every injected fault flagged and counted, none elsewhere
     let span_len = |sp: paragyro_firmware::replay::Span| {
         sp.end.min(s.rows.len()).saturating_sub(sp.start) as u32
     };
@@ -747,64 +855,23 @@ pub fn summarize(
         adc_fault_ticks == span_len(faults.crc) + span_len(faults.no_drdy),
         format!("{adc_fault_ticks} ticks with a lost ADC frame"),
     );
-    Summary {
-        scenario: sc.name.clone(),
-        seed,
-        core_pump_profile: format!("{:?}", pump.core_profile()),
-        board_pump: pump.name().to_string(),
-        converged,
-        retunes: c[9],
-        sense_amp_ratio: ratio,
-        drive_amp_ratio: drive_ratio,
-        ticks: s.rows.len() as u32,
-        bad_ticks: bad,
-        instr_mean,
-        stack_peak_bytes: end.stack_peak,
-        instr_max: imax,
-        instr_max_tick: imax_k,
-        systick_mean_with_shims: systick_mean,
-        wy2_est,
-        wy2_true,
-        wy2_tol,
-        pump_end_hz: s.rows.last().map_or(f64::NAN, |r| r.dds_pump_hz),
-        io_update_pulses: s.pulses,
-        half_period_pulses: s.half_period_pulses,
-        dds_writes: s.dds_writes,
-        dds_unlocked_ticks: s.unlocked_ticks,
-        fw_counters: FwCounts {
-            adc_spi_errors: c[0],
-            adc_crc_errors: c[1],
-            adc_not_ready: c[2],
-            adc_saturated: c[3],
-            accel_errors: c[4],
-            accel_saturated: c[5],
-            dds_errors: c[6],
-            guard_clamps: c[7],
-            drdy_missing: c[8],
-            core_bad_samples: c[10],
-            accel_stuck: c[11],
-        },
-        dds_fault_ticks,
-        adc_fault_ticks,
-        rate_dps_est: rate_est,
-        rate_dps_mean_last_s: mean_last_s(sc, s.rows.iter().map(|r| (r.t_s, r.fw.rate_dps))),
-        rate_dps_true: rate_true,
-        health_end: s.rows.last().map_or(0, |r| r.fw.health),
-        ramp,
-        rate_error: RateError::of(
-            sc,
-            &s.rows
-                .iter()
-                .map(|r| (r.t_s, r.rate_dps_true, r.fw.rate_dps))
-                .collect::<Vec<_>>(),
-            Some(&host.rates),
-        ),
-        exit_code: s.exit_code,
-        host_only: host,
-        wy2_fil_vs_host: vs_host,
-        wy2_fil_vs_host_tol: vs_host_tol,
-        pass: failures.is_empty(),
-        failures,
+    (dds_fault_ticks, adc_fault_ticks)
+}
+
+/// The firmware's counters by name.
+fn fw_counts(c: &[u32]) -> FwCounts {
+    FwCounts {
+        adc_spi_errors: c[0],
+        adc_crc_errors: c[1],
+        adc_not_ready: c[2],
+        adc_saturated: c[3],
+        accel_errors: c[4],
+        accel_saturated: c[5],
+        dds_errors: c[6],
+        guard_clamps: c[7],
+        drdy_missing: c[8],
+        core_bad_samples: c[10],
+        accel_stuck: c[11],
     }
 }
 
