@@ -194,7 +194,7 @@ impl std::fmt::Display for Outside {
 /// its force leak of 7e-4, recorded for 60 s of `characterise`, and a Coulomb friction of
 /// 5e-7 (5× its stated limit) that no library effect explains. The linear test leaves
 /// `unknown`; the force leak and the pump-driven electrostatic softening both qualify for
-/// the confirmation by re-simulation, and both are rejected (README, "Cost").
+/// the confirmation by re-simulation, and both are rejected (host-sim/diagnose/docs/notes.md, "Cost").
 pub fn slowest_path_record() -> anyhow::Result<paragyro_simulator::record::Record> {
     use rand::SeedableRng;
     let mut sc = paragyro_simulator::scenario::Scenario::load("characterise")?;

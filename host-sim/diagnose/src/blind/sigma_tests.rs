@@ -196,7 +196,7 @@ fn calibration_covariance_holds_the_joint_spread_of_the_device_parameters() {
     assert!(mean(&z2) > 0.5 && mean(&z2) < 2.0, "mean z² {z2:?}");
 }
 
-/// Measurement (not a check; prints the numbers README "The parameter face's σ" quotes):
+/// Measurement (not a check; prints the numbers docs/notes.md "The parameter face's σ" quotes):
 /// `cargo test --profile test -p paragyro-diagnose --lib sigma_against_noise_realizations
 /// -- --ignored --nocapture` (devices 300–347, 60 realizations each).
 #[test]

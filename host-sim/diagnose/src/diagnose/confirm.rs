@@ -149,7 +149,7 @@ pub const CONFIRM_MAX: usize = 2;
 
 /// Whole-record re-simulations the confirmation makes at most by default
 /// ([`Options::confirm_runs`]): with the calibration's two, four runs of the record, the
-/// bound that keeps a 60 s record under 10 s (README, "Cost"; the bench's second
+/// bound that keeps a 60 s record under 10 s (host-sim/diagnose/docs/notes.md, "Cost"; the bench's second
 /// function takes it).
 pub const CONFIRM_RUNS: usize = 2;
 
@@ -431,7 +431,7 @@ pub const HOPELESS_UNEXPLAINED: f64 = 1.0;
 /// (|Δ| > |size|, against it: the refit about the effect's own run finds the opposite
 /// effect). A step that overshoots zero is outside the region where the steps converge to
 /// the effect; on every development record and test the confirmation ran on, no run
-/// after such a step passed (README, "Cost"), and a candidate that converges moves by a
+/// after such a step passed (host-sim/diagnose/docs/notes.md, "Cost"), and a candidate that converges moves by a
 /// fraction of its size (a thermal drift at 45× its limit, 20 % low: +25 %, its runs
 /// leaving 61 %, 86 %, then 0.03 % of the gap).
 pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {

@@ -189,7 +189,7 @@ pub const WARMUP_S: f64 = 0.5;
 /// devices (t with 15: 1.074) and its covariance of the ten device parameters was nearly
 /// singular (`eᵀV⁻¹e` of their errors averaged 45 for 10 degrees of freedom; Hotelling's
 /// 10·ν/(ν − 11) = 37.5); with 32, rms z 1.034 (t with 31: 1.034) and `eᵀV⁻¹e` 18.8
-/// (15.5): README, "The parameter face's σ". A block of 32 is 0.37 s of a 20 s record's
+/// (15.5): docs/notes.md, "The parameter face's σ". A block of 32 is 0.37 s of a 20 s record's
 /// fit span (≈ 180 samples), several times the rows' correlation length (their residual's
 /// autocorrelation is gone by ≈ 50 samples), so the blocks stay nearly independent.
 pub const BLOCKS: usize = 32;
