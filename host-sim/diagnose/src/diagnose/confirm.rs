@@ -3,7 +3,7 @@
 //! then a library effect, significant and closing most of what can be closed, can still
 //! leave more than [`UNEXPLAINED_MAX`] of the gap above the noise, and the verdict would be
 //! `unknown` (blind run 5: a force leak at 72× its limit, its size fitted within 0.2 %).
-//! Here the simulator is re-run with such a candidate at its fitted size ([`confirm`] says
+//! Here the simulator is re-run with such a candidate at its fitted size (`confirm` says
 //! which, at most [`CONFIRM_MAX`]), on the model recalibrated jointly with it, refined by
 //! Gauss–Newton steps (the 14 θ and the effect's size refitted on the gap each run leaves)
 //! until a step would move the size by at most [`CONVERGED_STEP`] of it or the budget of
