@@ -1,0 +1,264 @@
+//! The front page's headline table (`README.md`, between `<!-- headline:begin -->` and
+//! `<!-- headline:end -->`) against the sources its rows name: every number of a row's
+//! value must be a number the source gives. One source per figure, so the figures cannot
+//! drift apart (tests/README.md, "The headline table").
+//!
+//! * `paragyro-sim -- results`: regenerated here (`paragyro_simulator::results`, every
+//!   built-in scenario in f32 and f64, seconds at the test profile);
+//! * `paragyro-fil -- budget`: the budgets are `paragyro_fil::budget`'s constants; the
+//!   measured flash, RAM and tick need the thumb build and QEMU (`.ci/run`), so they are
+//!   checked against the artifacts that run leaves (`target/paragyro-firmware-stm32f405.elf`,
+//!   `target/fil/summary.json`) when `PARAGYRO_FW_FIGURES=1` is set;
+//! * `--example blind -- 100 6868`: the results of that run as committed in
+//!   `host-sim/diagnose/blind-benchmark.md` (a run of 100 diagnoses takes minutes).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace root")
+        .to_path_buf()
+}
+
+fn read(rel: &str) -> String {
+    fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// (figure, value, source) of each row of the README's headline table.
+fn headline_rows(readme: &str) -> Vec<(String, String, String)> {
+    let begin = readme
+        .find("<!-- headline:begin -->")
+        .expect("README.md has <!-- headline:begin -->");
+    let end = readme
+        .find("<!-- headline:end -->")
+        .expect("README.md has <!-- headline:end -->");
+    readme[begin..end]
+        .lines()
+        .filter(|l| l.starts_with('|') && !l.starts_with("|---") && !l.starts_with("| figure"))
+        .map(|l| {
+            let cells: Vec<String> = l
+                .trim()
+                .trim_matches('|')
+                .split(" | ")
+                .map(|c| c.trim().to_string())
+                .collect();
+            assert_eq!(
+                cells.len(),
+                3,
+                "headline row with {} cells: {l}",
+                cells.len()
+            );
+            (cells[0].clone(), cells[1].clone(), cells[2].clone())
+        })
+        .collect()
+}
+
+/// The numbers of a text as written: `65 416`, `0.48`, `12 000` (groups of three digits
+/// after a space belong to the number); digits glued to a letter (`θ14`, `f32`) are names,
+/// not numbers.
+fn numbers(text: &str) -> Vec<String> {
+    let c: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < c.len() {
+        let glued = i > 0 && (c[i - 1].is_alphabetic() || c[i - 1] == '_');
+        if !c[i].is_ascii_digit() || glued {
+            // skip the rest of a name
+            while i < c.len() && (c[i].is_alphanumeric() || c[i] == '_') {
+                i += 1;
+            }
+            i += usize::from(i < c.len() && !c[i].is_ascii_digit());
+            continue;
+        }
+        let start = i;
+        loop {
+            while i < c.len() && (c[i].is_ascii_digit() || c[i] == '.') {
+                i += 1;
+            }
+            // `65 416`: a space and exactly three digits
+            let group = i + 4 <= c.len()
+                && c[i] == ' '
+                && c[i + 1..i + 4].iter().all(char::is_ascii_digit)
+                && (i + 4 == c.len() || !c[i + 4].is_ascii_digit());
+            if group {
+                i += 4;
+            } else {
+                break;
+            }
+        }
+        let n: String = c[start..i].iter().collect();
+        out.push(n.trim_end_matches('.').to_string());
+    }
+    out
+}
+
+/// `65536` → `65 536`.
+fn grouped(n: u64) -> String {
+    let s = n.to_string();
+    let mut out = String::new();
+    for (k, ch) in s.chars().enumerate() {
+        if k > 0 && (s.len() - k).is_multiple_of(3) {
+            out.push(' ');
+        }
+        out.push(ch);
+    }
+    out
+}
+
+/// The numbers of `value` that `source` does not give.
+fn missing(value: &str, source: &str) -> Vec<String> {
+    let have = numbers(source);
+    numbers(value)
+        .into_iter()
+        .filter(|n| !have.contains(n))
+        .collect()
+}
+
+/// The firmware's budgets, and with `PARAGYRO_FW_FIGURES=1` the measured figures from the
+/// artifacts `.ci/run` leaves.
+fn budget_source() -> (String, bool) {
+    use paragyro_fil::budget as bu;
+    let mut s = format!(
+        "budgets {} {} {} {}",
+        grouped(bu::FLASH_BUDGET),
+        grouped(bu::RAM_BUDGET),
+        grouped(bu::TICK_MEAN_TARGET as u64),
+        grouped(bu::TICK_MAX_TARGET)
+    );
+    if std::env::var("PARAGYRO_FW_FIGURES").as_deref() != Ok("1") {
+        return (s, false);
+    }
+    let elf = root().join("target/paragyro-firmware-stm32f405.elf");
+    let summary = root().join("target/fil/summary.json");
+    let elf = fs::read(&elf).unwrap_or_else(|e| panic!("{}: {e} (bash .ci/run)", elf.display()));
+    let summary = fs::read_to_string(&summary)
+        .unwrap_or_else(|e| panic!("{}: {e} (cargo fw-loop)", summary.display()));
+    let (flash, ram_static) = paragyro_fil::elf::flash_and_ram(&elf).expect("the image's sizes");
+    let stack_peak = json_number(&summary, "stack_peak_bytes") as u64;
+    let instr_mean = json_number(&summary, "instr_mean");
+    let instr_max = json_number(&summary, "instr_max") as u64;
+    s += &format!(
+        " measured {} {} {} {}",
+        grouped(flash),
+        grouped(ram_static + stack_peak),
+        grouped(instr_mean.round() as u64),
+        grouped(instr_max)
+    );
+    (s, true)
+}
+
+/// The number after `"key":` in a JSON text (a test's reading of the loop's summary; the
+/// tests crate has no JSON parser).
+fn json_number(text: &str, key: &str) -> f64 {
+    let k = format!("\"{key}\":");
+    let at = text
+        .find(&k)
+        .unwrap_or_else(|| panic!("summary.json has no {key}"))
+        + k.len();
+    let v: String = text[at..]
+        .trim_start()
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || matches!(c, '.' | '-' | 'e' | 'E' | '+'))
+        .collect();
+    v.parse()
+        .unwrap_or_else(|e| panic!("summary.json {key}: {v}: {e}"))
+}
+
+/// The results section of blind run 14 in its results file.
+fn blind_source() -> String {
+    let text = read("host-sim/diagnose/blind-benchmark.md");
+    let start = text
+        .find("## Run 14 results")
+        .expect("blind-benchmark.md has \"## Run 14 results\"");
+    let rest = &text[start..];
+    let end = rest[3..].find("\n## ").map_or(rest.len(), |k| k + 3);
+    rest[..end].to_string()
+}
+
+#[test]
+fn the_headline_table_is_what_its_sources_give() {
+    let readme = read("README.md");
+    let rows = headline_rows(&readme);
+    assert!(rows.len() >= 5, "only {} headline rows", rows.len());
+    let mut results: Option<String> = None;
+    let (budget, measured) = budget_source();
+    let blind = blind_source();
+    let mut bad = Vec::new();
+    for (figure, value, source) in &rows {
+        let (src, partial) = if source.contains("paragyro-sim -- results") {
+            let table = results.get_or_insert_with(|| {
+                paragyro_simulator::results::results_table(&mut |_| {}).expect("results")
+            });
+            (table.as_str(), false)
+        } else if source.contains("paragyro-fil -- budget") {
+            (budget.as_str(), !measured)
+        } else if source.contains("--example blind -- 100 6868") {
+            (blind.as_str(), false)
+        } else {
+            bad.push(format!("{figure}: no known source in `{source}`"));
+            continue;
+        };
+        let miss = missing(value, src);
+        // without the firmware's artifacts only the budgets can be checked
+        if !miss.is_empty() && !partial {
+            bad.push(format!(
+                "{figure}: {value}: the source does not give {miss:?}; it gives:\n{src}"
+            ));
+        }
+    }
+    if !measured {
+        eprintln!(
+            "headline: the firmware's measured figures not checked (PARAGYRO_FW_FIGURES=1 after bash .ci/run)"
+        );
+    }
+    assert!(
+        bad.is_empty(),
+        "README.md headline table:\n{}",
+        bad.join("\n")
+    );
+}
+
+#[test]
+fn budgets_in_the_headline_are_the_enforced_ones() {
+    let readme = read("README.md");
+    let (budget, _) = budget_source();
+    let budget_numbers = numbers(&budget);
+    for (figure, value, source) in headline_rows(&readme) {
+        if source.contains("paragyro-fil -- budget") {
+            // "of N" and "budget A / B" are the enforced budgets
+            let stated: Vec<String> = value
+                .split(" of ")
+                .skip(1)
+                .chain(value.split("budget ").skip(1))
+                .flat_map(numbers)
+                .collect();
+            for n in stated {
+                assert!(
+                    budget_numbers.contains(&n),
+                    "{figure}: budget {n} is not paragyro_fil::budget's ({budget})"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn numbers_are_read_as_written() {
+    assert_eq!(
+        numbers("65 416 B of 65 536 B; θ14 0.48 %, f32 (0.074 %)"),
+        ["65 416", "65 536", "0.48", "0.074"]
+    );
+    assert_eq!(
+        numbers("11 712 mean, 14 654 max (budget 12 000 / 15 000)."),
+        ["11 712", "14 654", "12 000", "15 000"]
+    );
+    assert_eq!(numbers("95 % / 90 % / 100 %"), ["95", "90", "100"]);
+    assert_eq!(grouped(65536), "65 536");
+    assert_eq!(grouped(999), "999");
+    assert_eq!(
+        missing("0.48 % and 0.21 %", "θ14 0.48 %, θ17 0.22 %"),
+        ["0.21"]
+    );
+}
