@@ -176,8 +176,8 @@ fn draw_effect(rng: &mut Xoshiro256PlusPlus, e: Effect) -> EffectSpec {
 }
 
 /// The shares of the draw (cumulative): clean, one library effect, two, out of library.
-/// Run 4 (issue 11): 20 % clean, 45 % one, 10 % two, 25 % out of library (the module
-/// [`outside`], through the plant hook; run 3 drew 15 % of the quadratic stiffness).
+/// 20 % clean, 45 % one, 10 % two, 25 % out of library (the module [`outside`], through
+/// the plant hook).
 pub const SHARES: [f64; 3] = [0.20, 0.65, 0.75];
 
 /// Draws the N records' labels from `seed`.

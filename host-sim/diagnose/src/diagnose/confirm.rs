@@ -2,7 +2,7 @@
 //! about the calibrated model, and the calibration has absorbed part of a large effect:
 //! then a library effect, significant and closing most of what can be closed, can still
 //! leave more than [`UNEXPLAINED_MAX`] of the gap above the noise, and the verdict would be
-//! `unknown` (blind run 5: a force leak at 72× its limit, its size fitted within 0.2 %).
+//! `unknown` (e.g. a force leak at 72× its detection limit, its size fitted within 0.2 %).
 //! Here the simulator is re-run with such a candidate at its fitted size (`confirm` says
 //! which, at most [`CONFIRM_MAX`]), on the model recalibrated jointly with it, refined by
 //! Gauss–Newton steps (the 14 θ and the effect's size refitted on the gap each run leaves)
@@ -24,9 +24,9 @@
 //! them leaving more of the gap than the calibrated model without the effect
 //! ([`hopeless`]): the candidate is rejected on that run, and the runs the steps would
 //! have made are saved. Nor when it would move the size by at most [`CONVERGED_STEP`] of
-//! it ([`converged`]): the next run would leave the same gap (blind run 12: every one of
-//! the 15 candidates' steps after the first run moved the size by less than 1 % or, for
-//! two softenings, left the judgement as it was). The budget ([`CONFIRM_RUNS`] by default)
+//! it ([`converged`]): the next run would leave the same gap (on the scored blind records,
+//! the steps after a candidate's first run moved its size by less than 1 % or left the
+//! judgement as it was: blind-benchmark.md). The budget ([`CONFIRM_RUNS`] by default)
 //! bounds the diagnosis's time: each candidate is given its first run, and the steps of
 //! the first ones take what the later ones leave.
 
@@ -166,8 +166,8 @@ pub const CONVERGED_THETA_SIGMAS: f64 = 1.0;
 /// run it would make leaves the gap this one left. Both are needed: the size alone can
 /// settle while the θ have not (a thermal drift at 45× its limit: its second step moved
 /// the size by −0.3 % and θ by up to 56 σ, and the third run left 0.03 % of the gap where
-/// the second had left 86 %); blind run 12's rejected candidates' first steps moved the
-/// size by at most 0.27 % and θ by at most 0.28 σ.
+/// the second had left 86 %); rejected candidates' first steps move the size by a fraction
+/// of a percent and θ by a fraction of σ (the test below).
 pub fn converged(size: f64, delta: f64, theta_sigmas: f64) -> bool {
     delta.abs() <= CONVERGED_STEP * size.abs() && theta_sigmas <= CONVERGED_THETA_SIGMAS
 }
@@ -260,8 +260,7 @@ pub(crate) fn confirm(
 /// well on the fit span and still extrapolate badly to the held-out span (a geometric
 /// nonlinearity of −5e-6 on a toleranced device, tests/calibrate.rs,
 /// `a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation`: its
-/// size fitted within 0.04 %, |size|/σ 1 340, held-out closure −0.63; blind run 13's one
-/// top-1 miss, a nonlinearity at 50.5× its limit, was not among the candidates). The
+/// size fitted within 0.04 %, |size|/σ 1 340, held-out closure −0.63). The
 /// confirmation's rules judge such a candidate as any other: on development blind seed 2
 /// the 100 verdicts are the same with and without this second rule (30 runs on 27
 /// candidates against 21 on 18).
@@ -441,8 +440,8 @@ pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {
 /// One candidate re-simulated and tested (module docs), with at most `steps` Gauss–Newton
 /// steps (each a run of the record). The steps: the effect's run, the 14 θ and its size
 /// refitted on the gap it leaves, the run repeated. A large effect's linear fit about the
-/// calibrated model is close in size but leaves the θ it moved off (blind run 10: a
-/// thermal drift at 45× its limit, its size within 0.4 %, left 6.6e8 of row energy; one
+/// calibrated model is close in size but leaves the θ it moved off (a thermal drift at 45×
+/// its limit, its size within 0.4 %, left 6.6e8 of row energy; one
 /// step brings it to 4.5e4).
 fn test_one(
     inp: &Inputs<'_>,
@@ -551,7 +550,7 @@ fn test_one(
 mod tests {
     use super::{converged, hopeless};
 
-    /// Blind run 12's rejected nonlinear damping (record 14): its first step moved the
+    /// A rejected nonlinear damping of a scored blind record: its first step moved the
     /// size by −0.27 % and θ by 0.28 σ at most; the next two runs left 34.3 % of the gap
     /// as the first had. Converged.
     #[test]

@@ -121,8 +121,8 @@ pub const NOISE_ROW_ENERGY: f64 = 1.08;
 /// every device; with one level for all rows, the confirmation read that as a gap a large
 /// effect leaves unexplained (an angular vibration at 60 °/s: blind-benchmark.md). The
 /// confirmation's per-row rule judges rows against this profile (its scatter,
-/// [`NOISE_ROW_SCATTER`], was measured about it); since run 10 the `none` gate uses each
-/// record's own noise per row instead (`noise::row_noise`: the sense 1st-harmonic rows'
+/// [`NOISE_ROW_SCATTER`], was measured about it); the `none` gate uses each record's own
+/// noise per row instead (`noise::row_noise`: the sense 1st-harmonic rows'
 /// follows the device, up to 2.4× this profile).
 pub const NOISE_ROW_PROFILE: [f64; NR] = [
     0.704, 1.510, 1.324, 0.930, 0.990, 0.811, 0.849, 0.686, 1.125, 1.071,

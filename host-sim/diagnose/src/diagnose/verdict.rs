@@ -316,8 +316,8 @@ fn secondary(
 /// Only where what the verdict leaves is above the row's own noise level (`own`, energy
 /// per sample) by more than [`ROW_SCATTER_SIGMAS`] × its scatter about that level
 /// ([`NOISE_ROW_SCATTER_OWN`] × ν²): near the noise, the catch-all's many columns close a
-/// row's held-out energy by that much on no gap at all (blind run 10: an angular vibration
-/// at 1.8× its limit, fitted at 36.3 ± 1.0 °/s, left its drive 1st quadrature at 1.77
+/// row's held-out energy by that much on no gap at all (an angular vibration at 1.8× its
+/// limit, fitted at 36.3 ± 1.0 °/s, left its drive 1st quadrature at 1.77
 /// against the catch-all's 1.65 and its own level 1.78, and read `unknown`).
 fn unexplained_rows(
     cols: &Columns,
