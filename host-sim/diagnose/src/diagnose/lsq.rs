@@ -183,7 +183,7 @@ impl Bank {
     /// `G⁻¹ (Σ ŝ_b ŝ_bᵀ) G⁻¹ · B/(B − 1)` (CR1, used up to issue 11) does not undo: on 48
     /// clean toleranced devices the calibration's σ against the spread of the estimates over
     /// noise realizations had a geometric mean of 0.951 with it on 16 blocks (0.967 expected
-    /// of an unbiased variance from 15 sums), 0.977 in this form on 32 (0.984): README, "The
+    /// of an unbiased variance from 15 sums), 0.977 in this form on 32 (0.984): docs/notes.md, "The
     /// parameter face's σ". With fewer than two blocks it is the plain sandwich.
     pub(crate) fn fit(&self, s: &[usize]) -> Fit {
         let p = s.len();
