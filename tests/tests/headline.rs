@@ -11,9 +11,13 @@
 //!   `target/fil/summary.json`) when `PARAGYRO_FW_FIGURES=1` is set;
 //! * `--example blind -- 100 6868`: the results of that run as committed in
 //!   `host-sim/diagnose/blind-benchmark.md` (a run of 100 diagnoses takes minutes).
+//!
+//! And the results table of `host-sim/README.md` is `paragyro-sim results`' table, cell
+//! for cell but the wall times.
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -24,6 +28,24 @@ fn root() -> PathBuf {
 
 fn read(rel: &str) -> String {
     fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// `paragyro-sim results`' table, regenerated once per test run.
+fn results() -> &'static str {
+    static TABLE: OnceLock<String> = OnceLock::new();
+    TABLE.get_or_init(|| paragyro_simulator::results::results_table(&mut |_| {}).expect("results"))
+}
+
+/// The first three cells (scenario, core, result) of each row of a results table.
+fn result_rows(table: &str) -> Vec<[String; 3]> {
+    table
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .map(|l| {
+            let c: Vec<&str> = l.trim_matches('|').split(" | ").map(str::trim).collect();
+            [c[0].to_string(), c[1].to_string(), c[2].to_string()]
+        })
+        .collect()
 }
 
 /// (figure, value, source) of each row of the README's headline table.
@@ -182,16 +204,12 @@ fn the_headline_table_is_what_its_sources_give() {
     let readme = read("README.md");
     let rows = headline_rows(&readme);
     assert!(rows.len() >= 5, "only {} headline rows", rows.len());
-    let mut results: Option<String> = None;
     let (budget, measured) = budget_source();
     let blind = blind_source();
     let mut bad = Vec::new();
     for (figure, value, source) in &rows {
         let (src, partial) = if source.contains("paragyro-sim -- results") {
-            let table = results.get_or_insert_with(|| {
-                paragyro_simulator::results::results_table(&mut |_| {}).expect("results")
-            });
-            (table.as_str(), false)
+            (results(), false)
         } else if source.contains("paragyro-fil -- budget") {
             (budget.as_str(), !measured)
         } else if source.contains("--example blind -- 100 6868") {
@@ -217,6 +235,25 @@ fn the_headline_table_is_what_its_sources_give() {
         bad.is_empty(),
         "README.md headline table:\n{}",
         bad.join("\n")
+    );
+}
+
+/// host-sim/README.md's results table is what `paragyro-sim results` prints (but the wall
+/// times): regenerate it with that command when the estimator or the simulator changes.
+#[test]
+fn the_results_table_of_the_host_sim_guide_is_what_results_gives() {
+    let guide = read("host-sim/README.md");
+    let start = guide
+        .find("## Results")
+        .expect("host-sim/README.md has ## Results");
+    let section = &guide[start..];
+    let end = section[3..].find("\n## ").map_or(section.len(), |k| k + 3);
+    let documented = result_rows(&section[..end]);
+    let measured = result_rows(results());
+    assert!(!measured.is_empty(), "no rows from results_table");
+    assert_eq!(
+        documented, measured,
+        "host-sim/README.md \"Results\" differs from `cargo run --release -p paragyro-sim -- results`"
     );
 }
 
