@@ -9,6 +9,9 @@
 //!   measured flash, RAM and tick need the thumb build and QEMU (`.ci/run`), so they are
 //!   checked against the artifacts that run leaves (`target/paragyro-firmware-stm32f405.elf`,
 //!   `target/fil/summary.json`) when `PARAGYRO_FW_FIGURES=1` is set;
+//! * `paragyro-sim -- rate-response`: the chirp, the step and the ramp of that report
+//!   regenerated here (`paragyro_simulator::rate_response`, f32, seed 1; seconds), with the
+//!   precision the table shows;
 //! * `--example blind -- 100 6868`: the results of that run as committed in
 //!   `host-sim/diagnose/blind-benchmark.md` (a run of 100 diagnoses takes minutes).
 //!
@@ -188,6 +191,28 @@ fn json_number(text: &str, key: &str) -> f64 {
         .unwrap_or_else(|e| panic!("summary.json {key}: {v}: {e}"))
 }
 
+/// The rate channel's bandwidth (Hz), the step's largest error after 25 ms (% of the
+/// step), the ramp's scale-factor error (ppm) and nonlinearity (ppm FS), as the datasheet
+/// rounds them: what `paragyro-sim rate-response` measures (f32, seed 1).
+fn rate_source() -> String {
+    use paragyro_simulator::rate_response::{Options, chirp, ramp, step};
+    let o = Options {
+        precision: paragyro_simulator::runner::Precision::F32,
+        seed: 1,
+        allan_s: None,
+    };
+    let f = chirp(&o, 0.1, 200.0, 20.0, 24.0).expect("chirp");
+    let (st, _) = step(&o).expect("step");
+    let (r, _) = ramp(&o).expect("ramp");
+    format!(
+        "bandwidth {:.1} Hz, step {:.2} %, scale factor {:.0} ppm, nonlinearity {:.0} ppm FS",
+        f.bandwidth_3db_hz.unwrap_or(f64::NAN),
+        st.max_err_after_25ms_pct,
+        r.scale_factor_err_ppm,
+        r.nonlinearity_ppm_fs
+    )
+}
+
 /// The results section of blind run 14 in its results file.
 fn blind_source() -> String {
     let text = read("host-sim/diagnose/blind-benchmark.md");
@@ -206,10 +231,21 @@ fn the_headline_table_is_what_its_sources_give() {
     assert!(rows.len() >= 5, "only {} headline rows", rows.len());
     let (budget, measured) = budget_source();
     let blind = blind_source();
+    // the rate channel runs beside the results table (seconds each)
+    let mut rate_run = rows
+        .iter()
+        .any(|r| r.2.contains("paragyro-sim -- rate-response"))
+        .then(|| std::thread::spawn(rate_source));
+    let mut rate: Option<String> = None;
     let mut bad = Vec::new();
     for (figure, value, source) in &rows {
         let (src, partial) = if source.contains("paragyro-sim -- results") {
             (results(), false)
+        } else if source.contains("paragyro-sim -- rate-response") {
+            if rate.is_none() {
+                rate = rate_run.take().map(|h| h.join().expect("rate-response"));
+            }
+            (rate.as_deref().unwrap_or(""), false)
         } else if source.contains("paragyro-fil -- budget") {
             (budget.as_str(), !measured)
         } else if source.contains("--example blind -- 100 6868") {
