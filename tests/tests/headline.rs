@@ -262,6 +262,27 @@ fn the_headline_table_is_what_its_sources_give() {
             ));
         }
     }
+    // the same four figures in the host-sim guide's datasheet
+    let rate = rate.unwrap_or_else(rate_source);
+    let guide = read("host-sim/README.md");
+    for quantity in [
+        "| bandwidth",
+        "| 100 °/s step",
+        "| scale-factor error",
+        "| nonlinearity",
+    ] {
+        let row = guide
+            .lines()
+            .find(|l| l.starts_with(quantity))
+            .unwrap_or_else(|| panic!("host-sim/README.md datasheet has no row {quantity}"));
+        let value = row.split(" | ").nth(1).unwrap_or("");
+        let miss = missing(value, &rate);
+        if !miss.is_empty() {
+            bad.push(format!(
+                "host-sim/README.md datasheet {row}: the source does not give {miss:?}; it gives {rate}"
+            ));
+        }
+    }
     if !measured {
         eprintln!(
             "headline: the firmware's measured figures not checked (PARAGYRO_FW_FIGURES=1 after bash .ci/run)"
