@@ -22,8 +22,8 @@ fn root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Every `.rs` file under the crates' `src/` folders (tests, benches, examples and
-/// build output excluded).
+/// Every `.rs` file under the `src/` folders of every crate of the repository (the fuzz
+/// crate's targets too; tests, benches, examples and build output excluded).
 fn sources() -> Vec<PathBuf> {
     let mut out = Vec::new();
     let mut stack: Vec<PathBuf> = [
@@ -37,6 +37,8 @@ fn sources() -> Vec<PathBuf> {
         "host-sim/cli/src",
         "tests/src",
         "tests/xtask/src",
+        "tests/fuzz/src",
+        "tests/fuzz/fuzz_targets",
     ]
     .iter()
     .map(|d| root().join(d))
