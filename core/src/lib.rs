@@ -1,11 +1,14 @@
 //! # paragyro-core
 //!
 //! The `no_std`, allocation-free signal chain of a parametrically excited MEMS rate
-//! gyroscope (seed 000): at every 500 Hz sample of the lock-in outputs it updates an
-//! 8×8 (drive) and a 6×6 (sense) recursive least squares estimate of the paper's θ1, θ2,
+//! gyroscope (the model of *Parameter identification of a parametrically excited rate
+//! micro-gyroscope using recursive least squares method*, eq. 6): at every 500 Hz sample of
+//! the lock-in outputs it updates an 8×8 (drive) and a 6×6 (sense) recursive least squares
+//! estimate of the paper's θ1, θ2,
 //! recovers the physical parameters (damping, natural frequencies, nonlinear stiffness,
 //! parametric excitation, coupling, angular rate) and retunes the pump so that it sits at
-//! twice the sense-mode natural frequency.
+//! twice the sense-mode natural frequency. The design and the derivation (with the
+//! paper's errata) are in the crate's `README.md` and `docs/derivation.md`.
 //!
 //! One concept per module; `lib.rs` only re-exports. [`config::Config::build`] validates
 //! the SI settings once and returns the runtime [`estimator::Estimator`] (a design built
