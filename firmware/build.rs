@@ -12,6 +12,6 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     // identical code folding (executable sections only, so defmt's tables are untouched):
-    // ~340 B of the 64 KiB budget (firmware/README.md, "Cost")
+    // ~340 B of the stm32f405 image (firmware/README.md, "Budgets")
     println!("cargo:rustc-link-arg-bins=--icf=all");
 }

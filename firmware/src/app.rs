@@ -898,7 +898,7 @@ where
 
     /// Writes into the DDS's buffers the words that differ from its active ones (all of
     /// them after an error or a mapping change), stopping at the first error. Not inlined:
-    /// one copy for both steps (the stm32f405 image's 64 KiB flash budget).
+    /// one copy for both steps (the stm32f405 image's flash budget).
     #[inline(never)]
     fn load(
         &mut self,

@@ -129,8 +129,8 @@ impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
     }
 }
 
-/// The warm start on this board (feature `warm-start`: it does not fit the 64 KiB image
-/// budget yet, firmware/README.md "Warm start on the stm32f405 board").
+/// The warm start on this board (always built in; firmware/README.md "Warm start on the
+/// stm32f405 board").
 ///
 /// The store is sectors 10 and 11 (128 KiB each; the `STORE` region of memory.x,
 /// outside the image's `FLASH` region). At boot the newest record goes into the
@@ -139,7 +139,6 @@ impl<P: embedded_hal::digital::OutputPin> IoUpdate for HalfPeriodIo<P> {
 /// flash stalls). In the loop, [`Saver::poll`] programs at most 8 bytes per tick after
 /// the tick's work ([`SavePolicy::BOARD`]); its cycles (flash stalls included) are
 /// reported beside the tick's.
-#[cfg(feature = "warm-start")]
 mod warm {
     use cortex_m::peripheral::DWT;
     use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
@@ -245,22 +244,6 @@ mod warm {
             );
             self.poll_max = 0;
         }
-    }
-}
-
-/// Without the feature: nothing (no code in the image).
-#[cfg(not(feature = "warm-start"))]
-mod warm {
-    use paragyro_core::Estimator;
-    use stm32f4xx_hal::pac::FLASH;
-
-    pub struct Warm;
-
-    impl Warm {
-        pub fn boot(_flash: FLASH, _est: &mut Estimator<f32>) -> Warm {
-            Warm
-        }
-        pub fn tick(&mut self, _k: u32, _est: &Estimator<f32>) {}
     }
 }
 
@@ -464,7 +447,7 @@ fn main() -> ! {
 
 /// Panics print their location over defmt and stop at a `udf` (the probe reports the
 /// fault and a backtrace), as panic-probe does, but without formatting the message:
-/// `core::fmt` and the panic messages were ≈ 1.5 KB of the 64 KiB image. The library
+/// `core::fmt` and the panic messages were ≈ 1.5 KB of the image. The library
 /// is linted free of panics; what is left (HAL, indexing proven in range) should not fire.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
