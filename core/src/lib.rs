@@ -22,6 +22,7 @@
 //! | [`physics`] | Table 2, ω0, L0, θ ↔ physical parameters, rate |
 //! | [`lpf`], [`harmonics`], [`svf`], [`rows`] | replica low-pass, projections, slow filters, regression rows |
 //! | [`rls`] | Bierman-UD recursive least squares |
+//! | [`drift`] | the natural frequencies' drift through temperature: prediction, process noise, lead |
 //! | [`monitor`] | input checks, change detector, excitation, settle test |
 //! | [`excitation`], [`retune`] | pump scheduler (dither, ramps), retune supervisor |
 //! | [`rate`] | the fast rate channel (every sample, given the slow parameters), quadrature |
@@ -81,6 +82,7 @@
 
 pub mod complex;
 pub mod config;
+pub mod drift;
 pub mod estimator;
 pub mod excitation;
 pub mod harmonics;

@@ -738,6 +738,12 @@ impl<T: Real, const N: usize> Rls<T, N> {
         self.x
     }
 
+    /// One component of the estimate, `x_j` (0 for `j ≥ N`): no copy of the whole vector.
+    #[inline]
+    pub fn estimate_at(&self, j: usize) -> T {
+        self.x.get(j).copied().unwrap_or(T::ZERO)
+    }
+
     /// `trace(P) = Σ_j D_j Σ_{i≤j} U_ij²` (`N(N+1)/2` multiply-adds).
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
     pub fn trace(&self) -> T {

@@ -8,6 +8,7 @@
 //! temporary exists on the chip's stack (firmware/README.md).
 
 use crate::config::{Config, PumpProfile};
+use crate::drift::DriftDesign;
 use crate::lpf::ReplicaCoeffs;
 use crate::monitor::{ChangeDesign, InputLimits, SettleDesign};
 use crate::physics::theta_from_physical;
@@ -175,6 +176,8 @@ pub(crate) struct Fit<T> {
     /// drive θ14 and sense θ24 in their scaled units).
     pub walk_cap1: T,
     pub walk_cap2: T,
+    /// The drift tracker (`rls.drift_kappa`, `rls.drift_window_s`).
+    pub drift: DriftDesign<T>,
 }
 
 impl<T: Real> Fit<T> {
@@ -208,6 +211,13 @@ impl<T: Real> Fit<T> {
             walk2: T::ZERO,
             walk_cap1: T::ZERO,
             walk_cap2: T::ZERO,
+            // the row filter (ζ = 1) delays by 2/w_f at DC
+            drift: DriftDesign::new(
+                cfg.rls.drift_kappa,
+                cfg.rls.drift_window_s * cfg.fs_hz,
+                2.0 / (2.0 * core::f64::consts::PI * cfg.svf_hz) * cfg.fs_hz,
+                cfg.rls.drift_max_ppm_s * 1e-6 / cfg.fs_hz,
+            ),
         }
     }
 }

@@ -8,6 +8,7 @@
 
 use super::design::{Design, samples_at};
 use crate::config::Config;
+use crate::drift::DriftTracker;
 use crate::excitation::Scheduler;
 use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
@@ -134,6 +135,8 @@ pub(crate) struct State<T: Real> {
     pub last_reset: u64,
     /// The sense's θ24 at the drive's last walk (the rate walk carries its moves to θ14).
     pub walk_prev24: Option<T>,
+    /// The measured drift of θ12, θ22 (module `drift`).
+    pub drift: DriftTracker<T>,
     /// A warm start's first settle is due: the settle window counts from the end of the
     /// start-up gate (`persist`); cleared by that settle and by any reset.
     pub warm_first: bool,
@@ -181,6 +184,7 @@ impl<T: Real> State<T> {
             bad_gate_until: 0,
             last_reset: 0,
             walk_prev24: None,
+            drift: DriftTracker::default(),
             warm_first: false,
             change_pending: false,
             bound_learned: false,
@@ -226,6 +230,7 @@ impl<T: Real> State<T> {
             bad_gate_until,
             last_reset,
             walk_prev24,
+            drift,
             warm_first,
             change_pending,
             bound_learned,
@@ -245,6 +250,7 @@ impl<T: Real> State<T> {
         lin.move_to(th1n, th2n);
         *rate = RateState::new(&d.rate);
         *walk_prev24 = None;
+        *drift = DriftTracker::default();
         *stuck = StuckDetector::default();
         *det1 = ChangeDetector::new(&d.fit.change);
         *det2 = ChangeDetector::new(&d.fit.change);
@@ -347,7 +353,7 @@ impl<T: Real> State<T> {
         let x2 = self.rls2.estimate();
         let l = &self.lin;
         let t14 = l.th14n + d.fit.sc1[3] * x1[3];
-        let t22 = l.th22n + d.fit.sc2[1] * x2[1];
+        let t22 = l.th22n + d.fit.sc2[1] * (x2[1] + self.drift.lead(&d.fit.drift, 1));
         let t24 = l.th24n + d.fit.sc2[3] * x2[3];
         let g = (t14 - t24) * T::from_f64(0.25);
         -t22 + g * g

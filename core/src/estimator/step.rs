@@ -15,6 +15,7 @@
 use super::design::{DECIDE_EVERY, Design};
 use super::state::{Conditioned, Replicas, State};
 use crate::complex::Cplx;
+use crate::drift::DRIFT_COL;
 use crate::health::{Counters, Health};
 use crate::lpf::ReplicaChannel;
 use crate::monitor::InputCheck;
@@ -197,7 +198,8 @@ impl<T: Real> State<T> {
         let x1 = self.rls1.estimate();
         let x2 = self.rls2.estimate();
         let dev14 = d.fit.sc1[3] * x1[3];
-        let dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
+        let mut dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
+        dev2[DRIFT_COL] += d.fit.sc2[DRIFT_COL] * self.drift.lead(&d.fit.drift, 1);
         let th = self.rate.slow_theta(dev14, &dev2);
         // a gate is renewed while it lasts (the gate itself clears `settled`)
         let slow_ok = self.was_settled || self.rate.gates(self.k);
@@ -232,6 +234,7 @@ impl<T: Real> State<T> {
             self.rls2.begin_sample();
         }
         self.walk_rate(f, k);
+        let before = self.walk_drift(f, k);
         let rows = &self.last_rows;
         let mut sum1 = T::ZERO;
         let mut sum2 = T::ZERO;
@@ -241,6 +244,16 @@ impl<T: Real> State<T> {
             sum1 += self.rls1.update_scaled(a, &f.scw1[r], y).normalized_sq();
             let (a, y) = (&rows.sense_phi[r], rows.sense_y[r] * f.w2[r]);
             sum2 += self.rls2.update_scaled(a, &f.scw2[r], y).normalized_sq();
+        }
+        if f.drift.enabled() {
+            let [b1, b2] = before;
+            let corr = [
+                self.rls1.estimate_at(DRIFT_COL) - b1,
+                self.rls2.estimate_at(DRIFT_COL) - b2,
+            ];
+            // the velocity learns from a settled estimate, two windows after a reset
+            let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
+            self.drift.push(&f.drift, corr, learn);
         }
         let p = f.p_reset;
         if self.det1.push(&f.change, k, sum1) {
@@ -287,6 +300,27 @@ impl<T: Real> State<T> {
             }
             self.walk_prev24 = Some(th24);
         }
+    }
+
+    /// Stage 4b: the drift's prediction and walk (module `drift`): one axis every other
+    /// update, each axis every fourth with four times the move and the variance (the
+    /// chip's tick budget; the drift is slow against 8 ms). Returns the drift columns'
+    /// estimates before this sample's rows, whose corrections measure the drift.
+    #[inline(always)]
+    fn walk_drift(&mut self, f: &super::design::Fit<T>, k: u64) -> [T; 2] {
+        if f.drift.enabled() && k & 1 == 0 {
+            if k & 2 == 0 {
+                self.rls1
+                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
+            } else {
+                self.rls2
+                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
+            }
+        }
+        [
+            self.rls1.estimate_at(DRIFT_COL),
+            self.rls2.estimate_at(DRIFT_COL),
+        ]
     }
 
     /// Stage 5a: the settle test on ω̂y²; at the rising edge a pending change is cleared

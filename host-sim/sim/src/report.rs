@@ -114,7 +114,8 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
 /// The `trace.csv` header: t_s, pump_hz, pump_centre_hz, pump_scale, th1*_true, th2*_true,
 /// th1*_est, th2*_est, `<phys>_true`, `<phys>_est`, rate_dps_true, rate_dps_est, drive_amp_um,
 /// sense_amp_um, one 0/1 column per health flag, resets, bad_samples, then the rate channel:
-/// rate_dps_slow, quadrature_dps, rate_valid (0/1). `rate_dps_est` is the fast rate.
+/// rate_dps_slow, quadrature_dps, rate_valid (0/1), then the die temperature temp_c (°C; NaN
+/// without a `[temperature]` profile). `rate_dps_est` is the fast rate.
 pub fn csv_header() -> Vec<String> {
     let mut h: Vec<String> = ["t_s", "pump_hz", "pump_centre_hz", "pump_scale"]
         .iter()
@@ -136,7 +137,7 @@ pub fn csv_header() -> Vec<String> {
     h.extend(HEALTH_NAMES.iter().map(|n| n.to_string()));
     h.push("resets".into());
     h.push("bad_samples".into());
-    h.extend(["rate_dps_slow", "quadrature_dps", "rate_valid"].map(String::from));
+    h.extend(["rate_dps_slow", "quadrature_dps", "rate_valid", "temp_c"].map(String::from));
     h
 }
 
@@ -190,6 +191,8 @@ fn csv_row(r: &TraceRow, out: &mut String) {
         out.push_str(&fmt_f64(x));
     }
     out.push_str(if r.rate_valid { ",1" } else { ",0" });
+    out.push(',');
+    out.push_str(&fmt_f64(r.temp_c));
 }
 
 fn write_csv(path: &Path, rows: &[TraceRow]) -> Result<()> {

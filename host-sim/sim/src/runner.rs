@@ -78,6 +78,9 @@ pub fn core_config(sc: &Scenario) -> Config {
     if let Some(w) = sc.estimator.rate_walk_dps {
         c.rate.walk_dps = w;
     }
+    if let Some(kappa) = sc.estimator.drift_kappa {
+        c.rls.drift_kappa = kappa;
+    }
     c.dither.pump_hz = sc.estimator.dither_pump_hz;
     c.dither.freq_hz = sc.estimator.dither_freq_hz;
     c.dither.start_s = sc.estimator.dither_start_s;
@@ -522,6 +525,7 @@ pub fn simulate<T: Real>(
                 rate_dps_slow: paragyro_core::physics::rate_dps_from_gamma(phys[10], w0),
                 quadrature_dps: ls.out.rate.quadrature_dps,
                 rate_valid: ls.out.rate.valid,
+                temp_c: sc.temp_c(ls.t_s).unwrap_or(f64::NAN),
             });
             for (bit, what) in EVENT_NAMES {
                 if ls.out.events & bit != 0 {

@@ -72,6 +72,7 @@ mod events;
 mod locate;
 mod parse;
 mod spec;
+mod temperature;
 #[cfg(test)]
 mod tests;
 mod validate;
@@ -83,6 +84,7 @@ pub use spec::{
     EstimatorSpec, MeasureRun, MeasureSpec, NominalSpec, PlantAt, PlantOverrides, PlantParam,
     PlantSpec, PumpProfileSpec, SimSpec, TwinSpec,
 };
+pub use temperature::TemperatureSpec;
 
 /// One simulated experiment.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -107,6 +109,9 @@ pub struct Scenario {
     pub measures: Vec<MeasureSpec>,
     /// An optional second run of the same scenario with overrides.
     pub twin: Option<TwinSpec>,
+    /// The die temperature over the run and the plant's temperature coefficients
+    /// (`[temperature]`; `None`: a constant temperature, the plant as given).
+    pub temperature: Option<TemperatureSpec>,
     /// Where the scenario came from: `"built-in"` or the file path.
     pub source: String,
 }
@@ -248,6 +253,9 @@ impl Scenario {
                 rate_slope += slope;
             }
         }
+        if let Some(tp) = &self.temperature {
+            tp.apply(&mut p, tp.temp_c(t_s));
+        }
         let w0 = self.omega0_rad_s();
         let gamma = physics::gamma_from_rate_dps(p.rate_dps, w0);
         let gamma_p = (p.rate_accel_dps2 + rate_slope).to_radians() / (w0 * w0);
@@ -279,6 +287,11 @@ impl Scenario {
             accel_x: p.accel_x_mps2 * accel_scale,
             accel_y: p.accel_y_mps2 * accel_scale,
         }
+    }
+
+    /// The die temperature at `t_s`, °C (`None` without a `[temperature]` profile).
+    pub fn temp_c(&self, t_s: f64) -> Option<f64> {
+        self.temperature.as_ref().map(|tp| tp.temp_c(t_s))
     }
 
     /// The twin run as a full scenario: plant overrides applied; a `retune` override sets

@@ -99,6 +99,8 @@ pub struct TraceRow {
     pub quadrature_dps: f64,
     /// The fast rate's validity flag.
     pub rate_valid: bool,
+    /// The die temperature, °C (NaN without a `[temperature]` profile).
+    pub temp_c: f64,
 }
 
 /// Something that happened during a run (change detected, retune started, ...).

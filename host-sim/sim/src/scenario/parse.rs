@@ -8,6 +8,7 @@ use super::locate::{
     Problem, Seg, backticked, describe, humanize, line_col, locate, path_at, table_with_span,
 };
 use super::spec::{EstimatorSpec, MeasureSpec, PlantSpec, SimSpec, TwinSpec};
+use super::temperature::TemperatureSpec;
 use super::{Scenario, ScenarioError, ScenarioErrorKind};
 
 pub(super) fn default_seed() -> u64 {
@@ -35,6 +36,8 @@ pub(super) struct RawScenario {
     event: Vec<RawEvent>,
     #[serde(default)]
     measure: Vec<MeasureSpec>,
+    #[serde(default)]
+    temperature: Option<TemperatureSpec>,
 }
 
 /// An error of `source` at the byte offset `pos` of `text` (its line and column).
@@ -193,6 +196,7 @@ impl Scenario {
             events: order.iter().map(|&i| events[i]).collect(),
             measures: raw.measure,
             twin: raw.twin,
+            temperature: raw.temperature,
             source: source.to_string(),
         };
         scenario

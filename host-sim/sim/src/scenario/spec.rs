@@ -370,6 +370,9 @@ pub struct EstimatorSpec {
     /// The slow RLS's rate random walk per sample, °/s (core `rate.walk_dps`); `None`:
     /// the core's default.
     pub rate_walk_dps: Option<f64>,
+    /// Drift tracking's κ (core `rls.drift_kappa`, module `drift`; 0 off, 3 the design
+    /// value); `None`: the core's default (off).
+    pub drift_kappa: Option<f64>,
     /// Nominal (design) parameters.
     pub nominal: NominalSpec,
 }
@@ -388,6 +391,7 @@ impl Default for EstimatorSpec {
             retune: true,
             retune_ramp_s: 0.5,
             rate_walk_dps: None,
+            drift_kappa: None,
             nominal: NominalSpec::default(),
         }
     }

@@ -473,6 +473,7 @@ fn measure_values_average_the_sense_amplitude() {
         rate_dps_slow: 0.0,
         quadrature_dps: 0.0,
         rate_valid: false,
+        temp_c: f64::NAN,
     };
     let main: Vec<TraceRow> = (0..1000).map(|k| row(k as f64 * 0.002, 1.5)).collect();
     let twin: Vec<TraceRow> = (0..1000).map(|k| row(k as f64 * 0.002, 0.75)).collect();

@@ -13,7 +13,16 @@ impl Scenario {
         self.check_estimator()?;
         self.check_events(file_index)?;
         self.check_twin(file_index)?;
-        self.check_measures()
+        self.check_measures()?;
+        self.check_temperature()
+    }
+
+    /// The temperature profile and coefficients.
+    fn check_temperature(&self) -> Result<(), Problem> {
+        match self.temperature.as_ref().and_then(|t| t.problem()) {
+            Some((field, message)) => Err(problem(path(&["temperature", field]), message)),
+            None => Ok(()),
+        }
     }
 
     /// The run, the plant and the simulation settings.
@@ -83,6 +92,9 @@ impl Scenario {
         non_negative(est.dither_start_s, path(&["estimator", "dither_start_s"]))?;
         non_negative(est.gate_startup_s, path(&["estimator", "gate_startup_s"]))?;
         non_negative(est.retune_ramp_s, path(&["estimator", "retune_ramp_s"]))?;
+        if let Some(kappa) = est.drift_kappa {
+            non_negative(kappa, path(&["estimator", "drift_kappa"]))?;
+        }
         if let Some(w) = est.rate_walk_dps {
             non_negative(w, path(&["estimator", "rate_walk_dps"]))?;
         }
