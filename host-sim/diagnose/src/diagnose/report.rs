@@ -165,6 +165,28 @@ pub struct Separation {
     pub excitation: String,
 }
 
+/// A stage of the diagnosis that could not run as designed on this record, and what was
+/// done instead (report.json's `limitations`, absent when there is none): the diagnosis
+/// is total over the records the reader accepts, and an internal inconsistency or an
+/// estimate that is not physical becomes one of these, never an abort.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Limitation {
+    /// The stage (`calibration`, `confirmation`, `joint_calibration`, `output_error`, …).
+    pub stage: String,
+    /// What happened and what the diagnosis did instead.
+    pub detail: String,
+}
+
+impl Limitation {
+    /// A limitation of `stage`.
+    pub fn new(stage: &str, detail: impl Into<String>) -> Self {
+        Limitation {
+            stage: stage.into(),
+            detail: detail.into(),
+        }
+    }
+}
+
 /// report.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Report {
@@ -223,6 +245,10 @@ pub struct Report {
     pub seconds: f64,
     /// Wall time per stage, s.
     pub timing_s: BTreeMap<String, f64>,
+    /// The stages that could not run as designed on this record ([`Limitation`]); absent
+    /// from report.json when there is none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub limitations: Vec<Limitation>,
 }
 
 impl Report {
@@ -285,6 +311,8 @@ pub(crate) struct Parts<'a> {
     pub row_noise: [f64; super::NR],
     pub seconds: f64,
     pub timing: BTreeMap<String, f64>,
+    /// The stages that could not run as designed.
+    pub limitations: Vec<Limitation>,
 }
 
 /// The report from the stages' results.
@@ -345,6 +373,7 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
         samples: t.len(),
         seconds: p.seconds,
         timing_s: p.timing,
+        limitations: p.limitations,
     }
 }
 
