@@ -295,7 +295,15 @@ impl Columns {
         // the force terms are synthesised together (one synthesis per sample)
         let mut forces: Vec<(ColumnId, Box<ForceFn>)> = Vec::new();
         for effect in LIBRARY {
-            match library_columns(effect, rec, opts, rows, spans, &scan_base)? {
+            // an effect whose columns cannot be built on this record (an estimator pass
+            // or the beat scan failing) is untestable, with why: not an abort
+            let plan =
+                library_columns(effect, rec, opts, rows, spans, &scan_base).unwrap_or_else(|e| {
+                    Plan::Untestable(format!(
+                        "its columns could not be built on this record: {e:#}"
+                    ))
+                });
+            match plan {
                 Plan::Force(f) => forces.push((ColumnId::Effect(effect), f)),
                 Plan::Columns(c) => cols.extend(c),
                 Plan::Vibration(b, pair) => {
