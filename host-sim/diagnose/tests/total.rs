@@ -21,7 +21,9 @@ use std::time::Instant;
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::Outside;
 use paragyro_diagnose::blind::size_range;
-use paragyro_diagnose::diagnose::{Answer, Options, Report, diagnose, to_json_sorted};
+use paragyro_diagnose::diagnose::{
+    Answer, Options, Report, diagnose, to_json_sorted, write_report,
+};
 use paragyro_simulator::effects::{Effect, EffectSpec, LIBRARY};
 use paragyro_simulator::record::{RecordOptions, simulate_record_ext};
 use paragyro_simulator::scenario::Scenario;
@@ -367,4 +369,50 @@ fn a_calibration_that_is_not_physical_is_a_limitation_not_an_abort() {
     );
     // an out-of-library effect: no library effect is named
     assert_eq!(answer, Answer::Unknown);
+}
+
+/// A record no stage can take still gets a report (issue 31: total over the records the
+/// reader accepts): 1.5 s of record (the diagnosis needs 2 s), and 4 s whose lock-in
+/// channels are all zero (the drive dead: no usable rows). Verdict `unknown`, the reason
+/// the one limitation, and report.json, report.md and the plots are written.
+#[test]
+fn a_record_no_stage_can_take_gets_an_unknown_report_with_the_reason() {
+    let mut sc = Scenario::load("characterise").unwrap();
+    sc.duration_s = 4.0;
+    let opts = RecordOptions {
+        seed: Some(5),
+        rate_table: true,
+        ..RecordOptions::default()
+    };
+    let (rec, _) = simulate_record_ext(&sc, &opts, None, &mut |_| {}).unwrap();
+    let mut short = rec.clone();
+    short.rows.truncate(750);
+    let mut dead = rec.clone();
+    for r in &mut dead.rows {
+        r.lockin = Default::default();
+    }
+    for (what, rec, reason) in [
+        ("short", &short, "needs at least 2 s"),
+        ("dead", &dead, "usable samples"),
+    ] {
+        let d = diagnose(rec, &Options::default()).unwrap();
+        let r = &d.report;
+        assert_eq!(r.verdict.answer(), Answer::Unknown, "{what}");
+        assert_eq!(r.limitations.len(), 1, "{what}: {:?}", r.limitations);
+        assert_eq!(r.limitations[0].stage, "record");
+        assert!(
+            r.limitations[0].detail.contains(reason),
+            "{what}: {:?}",
+            r.limitations
+        );
+        let dir =
+            std::env::temp_dir().join(format!("paragyro-total-{what}-{}", std::process::id()));
+        let files = write_report(&dir, &d, "rec.csv").unwrap();
+        let back: Report =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap())
+                .unwrap();
+        assert_eq!(&back, r);
+        assert!(files.len() >= 3, "{files:?}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

@@ -400,13 +400,39 @@ pub(crate) fn calibration(
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
 ///
-/// Total over the records the reader accepts that hold at least 2 s with 1 s of usable
-/// samples after the warm-up (an error otherwise): a stage that cannot run as designed on
-/// a record (an estimate that is not physical, a re-simulation that fails, an effect whose
+/// Total over the records the reader accepts: a stage that cannot run as designed on a
+/// record (an estimate that is not physical, a re-simulation that fails, an effect whose
 /// columns a fit does not hold) becomes a [`report::Limitation`] in the report, never an
-/// abort.
+/// abort; a record no stage can take (shorter than 2 s, less than 1 s of usable samples
+/// after the warm-up) gets a report whose verdict is `unknown` with that reason
+/// ([`report::not_diagnosed`]). The one error is a configured model that is not physical
+/// (the options', not the record's).
 pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
+    // the configured model is the caller's choice: one the core refuses is an error of the
+    // options, not of the record
+    if let Some(why) = calibrate::unphysical(&opts.model) {
+        anyhow::bail!(
+            "the configured model ({}) is not physical: {why}",
+            opts.model.source
+        );
+    }
     let wall = Instant::now();
+    match diagnose_stages(rec, opts, wall) {
+        Ok(d) => Ok(d),
+        // a record the stages cannot take at all (shorter than 2 s, less than 1 s of
+        // usable samples after the warm-up, a header the simulator refuses): a report
+        // that says so, verdict `unknown`
+        Err(e) => Ok(report::not_diagnosed(
+            rec,
+            opts,
+            &format!("{e:#}"),
+            wall.elapsed().as_secs_f64(),
+        )),
+    }
+}
+
+/// The stages of [`diagnose`]; an error when the record cannot be taken at all.
+fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Result<Diagnosis> {
     let mut timing = Timing::new();
     let mut limits: Vec<report::Limitation> = Vec::new();
     // 1. the rows and 1b. the calibration (the parameter face)
