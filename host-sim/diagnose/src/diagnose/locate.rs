@@ -229,7 +229,13 @@ fn by_row(
 fn regimes(rec: &Record, opts: &Options, rows: &Rows, ks: &[usize], gap_k: &[f64]) -> Vec<Regime> {
     let n = rows.t.len();
     let regime = |vals: &dyn Fn(usize) -> f64, name: &str| -> Regime {
-        let mut v: Vec<(f64, f64)> = ks.iter().zip(gap_k).map(|(&k, &g)| (vals(k), g)).collect();
+        // finite pairs only (a row the reader kept with NaN has no place in a tercile)
+        let mut v: Vec<(f64, f64)> = ks
+            .iter()
+            .zip(gap_k)
+            .map(|(&k, &g)| (vals(k), g))
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
         // a total order (a comparator that calls NaN equal to everything is not one, and
         // the standard library's sort may panic on it since Rust 1.81): NaN last
         v.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -498,6 +498,16 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     let cols = columns::Columns::build(rec, opts, &rows, &spans)?;
     timing.tick("library_columns_and_beat_scan");
     let cols = cols.with_catch_all(&rows);
+    // a sample whose gap or any column is not finite is not usable (the columns are built
+    // from the record's envelopes: a row the reader kept with NaN or ∞)
+    for (k, u) in rows.usable.iter_mut().enumerate() {
+        *u = *u
+            && rows.y[k].iter().all(|v| v.is_finite())
+            && cols
+                .cols
+                .iter()
+                .all(|c| c.v.get(k).is_some_and(|r| r.iter().all(|v| v.is_finite())));
+    }
     // 3. fit and rank
     let fits = rank::Fits::build(&cols, &rows, &spans);
     timing.tick("catch_all_and_grams");
