@@ -395,4 +395,82 @@ mod tests {
         assert!(s.specs.is_empty());
         assert!(s.skipped[0].contains("not finite"), "{s:?}");
     }
+
+    /// The crash path itself, end to end on a record with a rate table: the stages run to
+    /// the verdict, which is then set as the parameter face names it with a second effect
+    /// on top (`anisodamping` and `feedthrough`, the feedthrough's columns fitted with the
+    /// baseline's). Before issue 31's fix `how_far` indexed past the fit (howfar.rs:86);
+    /// now the re-simulation adds the feedthrough alone and says why the anisodamping is
+    /// left out.
+    #[test]
+    fn how_far_with_a_face_named_anisodamping_under_a_second_effect() {
+        use crate::diagnose::verdict::{Answer, Decision, Secondary, Verdict};
+        use crate::diagnose::{Options, Stage, Timing, calibration, columns, rank};
+        use paragyro_simulator::record::{RecordOptions, simulate_record_with};
+        use paragyro_simulator::scenario::Scenario;
+
+        let mut sc = Scenario::load("characterise").unwrap();
+        sc.duration_s = 4.0;
+        let ro = RecordOptions {
+            seed: Some(3),
+            effects: vec!["feedthrough=3e-4".parse().unwrap()],
+            rate_table: true,
+            temp: None,
+        };
+        let (rec, _) = simulate_record_with(&sc, &ro, &mut |_| {}).unwrap();
+        let mut timing = Timing::new();
+        let mut limits = Vec::new();
+        let (mut rows, spans, opts, fit1) =
+            calibration(&rec, &Options::default(), &mut timing, &mut limits).unwrap();
+        rows.remove_theta(&fit1.dtheta);
+        let cols = columns::Columns::build(&rec, &opts, &rows, &spans)
+            .unwrap()
+            .with_catch_all(&rows);
+        let fits = rank::Fits::build(&cols, &rows, &spans);
+        assert!(cols.of(Effect::Anisodamping).is_empty());
+        let verdict_cols = cols.of(Effect::Feedthrough);
+        let after_fit = fits.bank.fit(&cols.with(&verdict_cols));
+        assert_eq!(after_fit.beta.len(), 15);
+        let decision = Decision {
+            verdict: Verdict::Effects {
+                primary: Effect::Anisodamping,
+                secondary: Some(Secondary {
+                    effect: Effect::Feedthrough,
+                    added_closure: 0.5,
+                }),
+            },
+            closest: Answer::Effect(Effect::Anisodamping),
+            verdict_cols,
+            after_fit,
+            unexplained: 0.0,
+            unexplained_rows: Vec::new(),
+            gap_fraction: 0.0,
+            gap_before: 0.0,
+            gap_after: 0.0,
+            residual_over_noise: 1.0,
+        };
+        let st = Stage {
+            rec: &rec,
+            opts: &opts,
+            rows: &rows,
+            spans: &spans,
+            cols: &cols,
+            fits: &fits,
+        };
+        let far = super::how_far(&st, &decision, &opts.model, &mut timing, &mut limits);
+        let report = far.report.expect("an output error");
+        assert_eq!(report.added.len(), 1, "{:?}", report.added);
+        assert!(
+            report.added[0].starts_with("feedthrough="),
+            "{:?}",
+            report.added
+        );
+        assert!(report.after.combined.is_finite());
+        assert!(
+            limits
+                .iter()
+                .any(|l| l.stage == "output_error" && l.detail.contains("anisodamping: no column")),
+            "{limits:?}"
+        );
+    }
 }
