@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
 use paragyro_diagnose::diagnose::confirm::{Run, Stop};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
-use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT};
+use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT, Limitation};
 use paragyro_diagnose::diagnose::{
     Answer, Candidate, Energies, HowFar, OutputError, Rate, Report, Secondary, Separation,
     SpansReport, Thresholds, Verdict,
@@ -146,7 +146,8 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
         prop::option::of(prop_oneof![
             Just(Stop::Converged),
             Just(Stop::Hopeless),
-            Just(Stop::Budget)
+            Just(Stop::Budget),
+            Just(Stop::Failed)
         ]),
         prop::option::of(num()),
     )
@@ -285,6 +286,7 @@ fn report() -> impl Strategy<Value = Report> {
                 samples: 10_001,
                 seconds: 3.5,
                 timing_s: BTreeMap::from([("rows".into(), 0.25)]),
+                limitations: Vec::new(),
             },
         )
 }
@@ -333,6 +335,34 @@ proptest! {
         let back: Report = serde_json::from_value(v).unwrap();
         prop_assert_eq!(back, r);
     }
+}
+
+/// A report with limitations (issue 31) has the key `limitations` besides format 3's, and
+/// round-trips; report.md lists them.
+#[test]
+fn limitations_are_a_key_when_there_are_some() {
+    let mut r = report()
+        .new_tree(&mut proptest::test_runner::TestRunner::deterministic())
+        .unwrap()
+        .current();
+    r.limitations = vec![Limitation::new(
+        "calibration",
+        "the first fit estimated a model that is not physical",
+    )];
+    let v = serde_json::to_value(&r).unwrap();
+    let keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
+    let mut want = KEYS.to_vec();
+    want.push("limitations");
+    want.sort_unstable();
+    assert_eq!(keys, want);
+    assert_eq!(v["limitations"][0]["stage"], "calibration");
+    let back: Report = serde_json::from_value(v).unwrap();
+    assert_eq!(back, r);
+    let md = r.markdown("rec.csv");
+    assert!(
+        md.contains("## Limitations") && md.contains("**calibration**: the first fit"),
+        "{md}"
+    );
 }
 
 #[test]

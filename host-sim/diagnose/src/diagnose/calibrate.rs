@@ -180,6 +180,25 @@ pub(crate) fn calibrated_model(model: &Model, rows: &Rows, fit: &ThetaFit, label
     }
 }
 
+/// Why `model` cannot be handed to the core or the simulator (a parameter not finite, or
+/// not positive where the physics needs it: the core's own checks of its nominal
+/// parameters, [`paragyro_core::Config::validate`]), or `None` when it can. A calibration
+/// on a record far from the model (or on too little excitation) can estimate such a model.
+pub(crate) fn unphysical(model: &Model) -> Option<String> {
+    if !model.gamma_offset.is_finite() {
+        return Some(format!("gamma_offset = {}", model.gamma_offset));
+    }
+    let mut cfg = paragyro_core::Config::table2();
+    cfg.nominal = model.phys;
+    cfg.validate().err().map(|e| {
+        let p = &model.phys;
+        format!(
+            "{e} (mu_x = {:.3e}, mu_y = {:.3e}, wx2 = {:.4}, wy2 = {:.4}, beta1 = {:.3e})",
+            p.mu_x, p.mu_y, p.wx2, p.wy2, p.beta1
+        )
+    })
+}
+
 /// θ of the device: the simulated model's θ (at the rows' rate) plus `Δθ`.
 fn device_theta(model: &Model, rows: &Rows, fit: &ThetaFit) -> [f64; 14] {
     let mut p = model.phys;
@@ -465,5 +484,32 @@ mod tests {
         assert_eq!(value_to_sigma(0.0, 1.0), "0");
         // σ not positive: four digits
         assert_eq!(value_to_sigma(2.5204, 0.0), "2.520");
+    }
+}
+
+#[cfg(test)]
+mod unphysical_tests {
+    use super::unphysical;
+    use crate::diagnose::Model;
+
+    /// Issue 31: a calibration on a rate-table reversal estimated μx ≤ 0, and the core
+    /// refused the model ("nominal.mu_x: must be finite and > 0") with no report written.
+    /// The check names it before the model reaches the core.
+    #[test]
+    fn a_model_the_core_would_refuse_is_named() {
+        assert_eq!(unphysical(&Model::table2()), None);
+        let mut m = Model::table2();
+        m.phys.mu_x = -2.0e-4;
+        let why = unphysical(&m).expect("μx < 0 is not physical");
+        assert!(why.contains("nominal.mu_x"), "{why}");
+        let mut m = Model::table2();
+        m.phys.wy2 = f64::NAN;
+        assert!(unphysical(&m).unwrap().contains("nominal.wy2"));
+        let mut m = Model::table2();
+        m.phys.gamma = f64::INFINITY;
+        assert!(unphysical(&m).is_some());
+        let mut m = Model::table2();
+        m.gamma_offset = f64::NAN;
+        assert!(unphysical(&m).unwrap().contains("gamma_offset"));
     }
 }

@@ -140,6 +140,8 @@ impl ProjTables {
 pub(crate) struct ColFilter {
     st: [SvfState<f64>; NR],
     started: bool,
+    /// The last finite input of each row (held over a non-finite one).
+    last: [f64; NR],
 }
 
 impl ColFilter {
@@ -147,6 +149,7 @@ impl ColFilter {
         ColFilter {
             st: [SvfState::at_rest(0.0); NR],
             started: false,
+            last: [0.0; NR],
         }
     }
 
@@ -158,6 +161,17 @@ impl ColFilter {
         u: &[f64; NR],
         w: &([f64; NROWS], [f64; NROWS]),
     ) -> [f64; NR] {
+        // a non-finite input (a record row with NaN or ∞, not usable) holds the last
+        // finite one: the filter's state is not poisoned for the rest of the record
+        let mut u = *u;
+        for (v, l) in u.iter_mut().zip(self.last.iter_mut()) {
+            if v.is_finite() {
+                *l = *v;
+            } else {
+                *v = *l;
+            }
+        }
+        let u = &u;
         if !self.started {
             for i in 0..NR {
                 self.st[i] = SvfState::at_rest(u[i]);
@@ -295,7 +309,15 @@ impl Columns {
         // the force terms are synthesised together (one synthesis per sample)
         let mut forces: Vec<(ColumnId, Box<ForceFn>)> = Vec::new();
         for effect in LIBRARY {
-            match library_columns(effect, rec, opts, rows, spans, &scan_base)? {
+            // an effect whose columns cannot be built on this record (an estimator pass
+            // or the beat scan failing) is untestable, with why: not an abort
+            let plan =
+                library_columns(effect, rec, opts, rows, spans, &scan_base).unwrap_or_else(|e| {
+                    Plan::Untestable(format!(
+                        "its columns could not be built on this record: {e:#}"
+                    ))
+                });
+            match plan {
                 Plan::Force(f) => forces.push((ColumnId::Effect(effect), f)),
                 Plan::Columns(c) => cols.extend(c),
                 Plan::Vibration(b, pair) => {

@@ -36,9 +36,11 @@ use paragyro_simulator::record::Record;
 
 use super::calibrate::{self, ThetaFit};
 use super::columns::{Column, Columns};
+use super::howfar::Specs;
 use super::lsq::{Bank, Fit, row_energy};
 use super::rank::Fits;
 use super::report::Candidate;
+use super::report::Limitation;
 use super::resim;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Verdict};
@@ -89,6 +91,10 @@ pub enum Stop {
     Hopeless,
     /// The budget of whole-record runs ([`Options::confirm_runs`]) was spent.
     Budget,
+    /// The next step could not be run (its model not physical, or its re-simulation or the
+    /// effect's columns about it failed: report.json's `limitations` says which); the last
+    /// run's judgement stands.
+    Failed,
 }
 
 impl std::fmt::Display for Stop {
@@ -97,6 +103,7 @@ impl std::fmt::Display for Stop {
             Stop::Converged => "converged",
             Stop::Hopeless => "hopeless",
             Stop::Budget => "budget spent",
+            Stop::Failed => "next step failed",
         })
     }
 }
@@ -200,13 +207,14 @@ pub(crate) fn confirm(
     decision: Decision,
     ranking: &[Candidate],
     timing: &mut Timing,
-) -> anyhow::Result<(Decision, Vec<Confirmation>)> {
+    limits: &mut Vec<Limitation>,
+) -> (Decision, Vec<Confirmation>) {
     if !inp.opts.resimulate
         || inp.opts.confirm_runs == 0
         || !matches!(decision.verdict, Verdict::Unknown)
         || decision.residual_over_noise <= NONE_NOISE_MAX
     {
-        return Ok((decision, Vec::new()));
+        return (decision, Vec::new());
     }
     let picks = picks(inp, ranking);
     let mut tests = Vec::new();
@@ -224,14 +232,24 @@ pub(crate) fn confirm(
             0
         };
         let steps = left.saturating_sub(1 + kept);
-        let (t, fit_e) = test_one(inp, effect, steps, timing)?;
+        let (t, fit_e) = match test_one(inp, effect, steps, timing, limits) {
+            Ok(r) => r,
+            Err(e) => {
+                limits.push(Limitation::new(
+                    "confirmation",
+                    format!("{effect} could not be re-simulated ({e:#}): not confirmed"),
+                ));
+                left = left.saturating_sub(1);
+                continue;
+            }
+        };
         left = left.saturating_sub(t.runs.len());
         let confirmed = t.confirmed;
         let unexplained = t.unexplained;
         tests.push(t);
         if confirmed {
             let verdict_cols = inp.cols.of(effect);
-            return Ok((
+            return (
                 Decision {
                     verdict: Verdict::Effects {
                         primary: effect,
@@ -246,10 +264,10 @@ pub(crate) fn confirm(
                     ..decision
                 },
                 tests,
-            ));
+            );
         }
     }
-    Ok((decision, tests))
+    (decision, tests)
 }
 
 /// The candidates [`confirm`] re-simulates, in order: the significant ones that close at
@@ -448,6 +466,7 @@ fn test_one(
     effect: Effect,
     steps: usize,
     timing: &mut Timing,
+    limits: &mut Vec<Limitation>,
 ) -> anyhow::Result<(Confirmation, super::lsq::Fit)> {
     let Inputs {
         rec,
@@ -461,7 +480,12 @@ fn test_one(
     } = *inp;
     let ec = cols.of(effect);
     let fit_e = fits.bank.fit(&cols.with(&ec));
-    let (specs, vib_phase) = super::howfar::specs_of(cols, rows, &[effect], &fit_e);
+    let Specs {
+        specs,
+        vib_phase,
+        skipped,
+    } = super::howfar::specs_of(cols, rows.gpd, &[effect], &fit_e);
+    anyhow::ensure!(!specs.is_empty(), "{}", skipped.join("; "));
     let joint = ThetaFit::joint(fit1, &fit_e);
     let model = calibrate::calibrated_model(
         &opts.model,
@@ -469,6 +493,9 @@ fn test_one(
         &joint,
         &format!("{} with {}", opts.model.source, specs[0]),
     );
+    if let Some(why) = calibrate::unphysical(&model) {
+        anyhow::bail!("the model recalibrated jointly with it is not physical: {why}");
+    }
     let opts_e = Options {
         model,
         ..opts.clone()
@@ -482,9 +509,19 @@ fn test_one(
     let mut runs = Vec::with_capacity(1 + steps);
     let mut j = judge(inp, &rows_e)?;
     runs.push(Run::of(specs[0].size, &j));
+    let failed = |limits: &mut Vec<Limitation>, n: usize, why: String| {
+        limits.push(Limitation::new(
+            "confirmation",
+            format!("{effect}: the Gauss–Newton step after run {n} could not be made ({why}): that run's judgement stands"),
+        ));
+        (Stop::Failed, None)
+    };
     let (stopped, next_step) = loop {
         let usable = both_usable(rows, &rows_e);
-        let ecols = super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans)?;
+        let ecols = match super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans) {
+            Ok(c) => c,
+            Err(e) => break failed(limits, runs.len(), format!("its columns: {e:#}")),
+        };
         let (step, _) = refit(&rows_e, &usable, spans, &ecols);
         let delta = step.beta.get(14).copied();
         let size = specs[0].size;
@@ -501,11 +538,21 @@ fn test_one(
             break (Stop::Budget, rel);
         }
         let mut dtheta = [0.0; 14];
-        dtheta.copy_from_slice(&step.beta[..14]);
-        if let Some(d) = delta {
-            specs[0].size += d;
+        for (t, b) in dtheta.iter_mut().zip(&step.beta) {
+            *t = *b;
         }
-        model_k = calibrate::calibrated_model(
+        let mut next = specs.clone();
+        if let Some(d) = delta {
+            next[0].size += d;
+        }
+        if !next[0].size.is_finite() {
+            break failed(
+                limits,
+                runs.len(),
+                format!("the step's size {} is not finite", next[0].size),
+            );
+        }
+        let m = calibrate::calibrated_model(
             &model_k,
             &rows_e,
             &ThetaFit {
@@ -514,12 +561,27 @@ fn test_one(
             },
             &model_k.source,
         );
+        if let Some(why) = calibrate::unphysical(&m) {
+            break failed(
+                limits,
+                runs.len(),
+                format!("its model is not physical: {why}"),
+            );
+        }
         let o = Options {
-            model: model_k.clone(),
+            model: m.clone(),
             ..opts.clone()
         };
-        rows_e = Rows::build_with(rec, &o, &specs, vib_phase, timing)?;
-        j = judge(inp, &rows_e)?;
+        let (r, jn) = match Rows::build_with(rec, &o, &next, vib_phase, timing)
+            .and_then(|r| judge(inp, &r).map(|jn| (r, jn)))
+        {
+            Ok(v) => v,
+            Err(e) => break failed(limits, runs.len(), format!("its re-simulation: {e:#}")),
+        };
+        specs = next;
+        model_k = m;
+        rows_e = r;
+        j = jn;
         runs.push(Run::of(specs[0].size, &j));
     };
     let Judged {

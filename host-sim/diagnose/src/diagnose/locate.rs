@@ -229,8 +229,16 @@ fn by_row(
 fn regimes(rec: &Record, opts: &Options, rows: &Rows, ks: &[usize], gap_k: &[f64]) -> Vec<Regime> {
     let n = rows.t.len();
     let regime = |vals: &dyn Fn(usize) -> f64, name: &str| -> Regime {
-        let mut v: Vec<(f64, f64)> = ks.iter().zip(gap_k).map(|(&k, &g)| (vals(k), g)).collect();
-        v.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
+        // finite pairs only (a row the reader kept with NaN has no place in a tercile)
+        let mut v: Vec<(f64, f64)> = ks
+            .iter()
+            .zip(gap_k)
+            .map(|(&k, &g)| (vals(k), g))
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
+        // a total order (a comparator that calls NaN equal to everything is not one, and
+        // the standard library's sort may panic on it since Rust 1.81): NaN last
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
         let m = v.len();
         let mean_all = v.iter().map(|p| p.1).sum::<f64>() / m.max(1) as f64;
         let terciles = (0..3)
@@ -307,7 +315,8 @@ fn in_time(rows: &Rows, ks: &[usize], gap_k: &[f64]) -> (Curve, Curve, TimeSpan)
         }
     }
     let mut sorted: Vec<(f64, f64)> = windows.clone();
-    sorted.sort_by(|a, b| b.1.partial_cmp(&a.1).unwrap_or(std::cmp::Ordering::Equal));
+    // largest first, NaN last (a total order: see `regimes`)
+    sorted.sort_by(|a, b| nan_low(b.1).total_cmp(&nan_low(a.1)));
     let total: f64 = sorted.iter().map(|w| w.1.max(0.0)).sum();
     let mut acc = 0.0;
     let mut ts_top = Vec::new();
@@ -326,6 +335,11 @@ fn in_time(rows: &Rows, ks: &[usize], gap_k: &[f64]) -> (Curve, Curve, TimeSpan)
         cusum_extreme_at_s: cmax.1,
     };
     (windows, cusum, time)
+}
+
+/// `v`, with NaN as −∞ (sorted last in a descending order).
+pub(crate) fn nan_low(v: f64) -> f64 {
+    if v.is_nan() { f64::NEG_INFINITY } else { v }
 }
 
 /// Pearson correlation of `a` and `b` (0 when either is constant or too short).

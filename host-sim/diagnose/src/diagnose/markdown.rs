@@ -97,6 +97,7 @@ pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
         r.rate.source()
     ));
     s.push_str(&verdict_text(r));
+    limitations(&mut s, r);
     confirmation(&mut s, r);
     parameter_face(&mut s, r);
     how_far(&mut s, r);
@@ -113,6 +114,17 @@ pub(crate) fn markdown(r: &Report, record_name: &str) -> String {
         100.0 * UNEXPLAINED_MAX
     ));
     s
+}
+
+/// The stages that could not run as designed on this record.
+fn limitations(s: &mut String, r: &Report) {
+    if r.limitations.is_empty() {
+        return;
+    }
+    s.push_str("\n\n## Limitations\n\nStages that could not run as designed on this record, and what was done instead:\n\n");
+    for l in &r.limitations {
+        s.push_str(&format!("- **{}**: {}\n", l.stage, l.detail));
+    }
 }
 
 /// What the verdict means, in one sentence.

@@ -77,8 +77,8 @@ pub mod vibration;
 mod tests;
 
 pub use report::{
-    Candidate, Diagnosis, Energies, HowFar, PlotData, Rate, Report, Separation, SpansReport,
-    Thresholds, to_json_sorted, write_report,
+    Candidate, Diagnosis, Energies, HowFar, Limitation, PlotData, Rate, Report, Separation,
+    SpansReport, Thresholds, to_json_sorted, write_report,
 };
 pub use resim::{OutputError, Resim, lockin_noise_diff_ratio, output_error};
 pub use rows::first_pump_hz;
@@ -306,10 +306,16 @@ pub(crate) struct Stage<'a> {
 /// simulator re-run on the record's inputs with the latest parameters, the rows minus its
 /// rows, the θ refitted on that gap. Returns the last rows, their spans, the options with
 /// the calibrated model and the last fit (its `Δθ` not yet removed from the rows).
+///
+/// A step whose estimate is not physical ([`calibrate::unphysical`]) is not taken, nor one
+/// whose re-simulation fails: the last model that ran stays (the configured one when it is
+/// the first), and `limits` says so. When the first re-simulation fails, the diagnosis goes
+/// on without re-simulation (the rows about the configured model).
 pub(crate) fn calibration(
     rec: &Record,
     opts: &Options,
     timing: &mut Timing,
+    limits: &mut Vec<report::Limitation>,
 ) -> anyhow::Result<(rows::Rows, rows::Spans, Options, calibrate::ThetaFit)> {
     let no_resim = Options {
         resimulate: false,
@@ -320,27 +326,117 @@ pub(crate) fn calibration(
     let mut fit = calibrate::fit_theta(&rows, &spans);
     let label = format!("{} calibrated on the record", opts.model.source);
     let mut opts_cal = opts.clone();
-    opts_cal.model = calibrate::calibrated_model(&opts.model, &rows, &fit, &label);
+    let first = calibrate::calibrated_model(&opts.model, &rows, &fit, &label);
+    match calibrate::unphysical(&first) {
+        None => opts_cal.model = first,
+        Some(why) => limits.push(report::Limitation::new(
+            "calibration",
+            format!(
+                "the first fit (without re-simulation) estimated a model that is not physical ({why}): the configured model is kept for the first re-simulation"
+            ),
+        )),
+    }
     timing.tick("calibration_fit");
     if opts.resimulate {
         for step in 0..CALIBRATION_RESIMULATIONS {
-            if step > 0 {
-                opts_cal.model = calibrate::calibrated_model(&opts_cal.model, &rows, &fit, &label);
+            let model = if step > 0 {
+                let m = calibrate::calibrated_model(&opts_cal.model, &rows, &fit, &label);
+                if let Some(why) = calibrate::unphysical(&m) {
+                    limits.push(report::Limitation::new(
+                        "calibration",
+                        format!(
+                            "step {} of {CALIBRATION_RESIMULATIONS} estimated a model that is not physical ({why}): the model of step {step} is kept",
+                            step + 1
+                        ),
+                    ));
+                    break;
+                }
+                m
+            } else {
+                opts_cal.model.clone()
+            };
+            let o = Options {
+                model,
+                ..opts_cal.clone()
+            };
+            match rows::Rows::build(rec, &o, timing).and_then(|r| {
+                let s = rows::Spans::of(&r)?;
+                Ok((r, s))
+            }) {
+                Ok((r, s)) => {
+                    rows = r;
+                    spans = s;
+                    opts_cal = o;
+                    fit = calibrate::fit_theta(&rows, &spans);
+                }
+                Err(e) if step == 0 => {
+                    limits.push(report::Limitation::new(
+                        "calibration",
+                        format!(
+                            "the re-simulation of the record with the calibrated model failed ({e:#}): the diagnosis goes on without re-simulation, about the configured model (no output error)"
+                        ),
+                    ));
+                    opts_cal = Options {
+                        resimulate: false,
+                        ..opts.clone()
+                    };
+                    break;
+                }
+                Err(e) => {
+                    limits.push(report::Limitation::new(
+                        "calibration",
+                        format!(
+                            "the re-simulation of step {} of {CALIBRATION_RESIMULATIONS} failed ({e:#}): the model of step {step} is kept",
+                            step + 1
+                        ),
+                    ));
+                    break;
+                }
             }
-            rows = rows::Rows::build(rec, &opts_cal, timing)?;
-            spans = rows::Spans::of(&rows)?;
-            fit = calibrate::fit_theta(&rows, &spans);
         }
     }
     Ok((rows, spans, opts_cal, fit))
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
+///
+/// Total over the records the reader accepts: a stage that cannot run as designed on a
+/// record (an estimate that is not physical, a re-simulation that fails, an effect whose
+/// columns a fit does not hold) becomes a [`report::Limitation`] in the report, never an
+/// abort; a record no stage can take (shorter than 2 s, less than 1 s of usable samples
+/// after the warm-up) gets a report whose verdict is `unknown` with that reason
+/// ([`report::not_diagnosed`]). The one error is a configured model that is not physical
+/// (the options', not the record's).
 pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
+    // the configured model is the caller's choice: one the core refuses is an error of the
+    // options, not of the record
+    if let Some(why) = calibrate::unphysical(&opts.model) {
+        anyhow::bail!(
+            "the configured model ({}) is not physical: {why}",
+            opts.model.source
+        );
+    }
     let wall = Instant::now();
+    match diagnose_stages(rec, opts, wall) {
+        Ok(d) => Ok(d),
+        // a record the stages cannot take at all (shorter than 2 s, less than 1 s of
+        // usable samples after the warm-up, a header the simulator refuses): a report
+        // that says so, verdict `unknown`
+        Err(e) => Ok(report::not_diagnosed(
+            rec,
+            opts,
+            &format!("{e:#}"),
+            wall.elapsed().as_secs_f64(),
+        )),
+    }
+}
+
+/// The stages of [`diagnose`]; an error when the record cannot be taken at all.
+fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Result<Diagnosis> {
     let mut timing = Timing::new();
+    let mut limits: Vec<report::Limitation> = Vec::new();
     // 1. the rows and 1b. the calibration (the parameter face)
-    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing)?;
+    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing, &mut limits)?;
     // the calibration's refinement is part of the model: the structural face starts from
     // the gap it leaves
     rows.remove_theta(&fit1.dtheta);
@@ -348,10 +444,40 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     // measured against it (ν²), and each row's noise level is it through this record's rows
     let e1 = resim::lockin_noise_diff_energy(rec)?;
     let nu2 = match &rows.before_sim {
-        Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, &e1)?,
+        Some(sim) => {
+            match resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, &e1) {
+                Ok(v) if v.is_finite() && v > 0.0 => v,
+                Ok(v) => {
+                    limits.push(report::Limitation::new(
+                        "noise",
+                        format!("the record's noise energy ratio came out {v}: 1 taken"),
+                    ));
+                    1.0
+                }
+                Err(e) => {
+                    limits.push(report::Limitation::new(
+                        "noise",
+                        format!("the record's noise energy ratio could not be estimated ({e:#}): 1 taken"),
+                    ));
+                    1.0
+                }
+            }
+        }
         None => 1.0,
     };
-    let row_noise = noise::row_noise(rec, &rows, &fit1.dtheta, &e1, spans.hold.clone())?;
+    let row_noise = match noise::row_noise(rec, &rows, &fit1.dtheta, &e1, spans.hold.clone()) {
+        Ok(v) if v.iter().all(|x| x.is_finite() && *x > 0.0) => v,
+        r => {
+            limits.push(report::Limitation::new(
+                "noise",
+                match r {
+                    Ok(v) => format!("the rows' noise levels came out {v:?}: the development profile (NOISE_ROW_ENERGY × NOISE_ROW_PROFILE) taken"),
+                    Err(e) => format!("the rows' noise levels could not be computed ({e:#}): the development profile (NOISE_ROW_ENERGY × NOISE_ROW_PROFILE) taken"),
+                },
+            ));
+            NOISE_ROW_PROFILE.map(|p| p * NOISE_ROW_ENERGY)
+        }
+    };
     timing.tick("row_noise");
     let cfg_model = opts.model.clone();
     let (face, _device) = calibrate::face(
@@ -360,7 +486,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         &rows,
         &fit1,
         nu2,
-        if opts.resimulate {
+        if opts_cal.resimulate {
             1 + CALIBRATION_RESIMULATIONS
         } else {
             1
@@ -372,6 +498,16 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     let cols = columns::Columns::build(rec, opts, &rows, &spans)?;
     timing.tick("library_columns_and_beat_scan");
     let cols = cols.with_catch_all(&rows);
+    // a sample whose gap or any column is not finite is not usable (the columns are built
+    // from the record's envelopes: a row the reader kept with NaN or ∞)
+    for (k, u) in rows.usable.iter_mut().enumerate() {
+        *u = *u
+            && rows.y[k].iter().all(|v| v.is_finite())
+            && cols
+                .cols
+                .iter()
+                .all(|c| c.v.get(k).is_some_and(|r| r.iter().all(|v| v.is_finite())));
+    }
     // 3. fit and rank
     let fits = rank::Fits::build(&cols, &rows, &spans);
     timing.tick("catch_all_and_grams");
@@ -395,7 +531,8 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         decision,
         &ranking,
         &mut timing,
-    )?;
+        &mut limits,
+    );
     // the parameter face with the verdict's effect(s) fitted jointly (an unmodelled force
     // otherwise leaks into the θ)
     let (face, joint_model) = if decision.verdict_cols.is_empty() {
@@ -417,7 +554,18 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
             face.resimulations,
         )
         .0;
-        (f, m)
+        match calibrate::unphysical(&m) {
+            None => (f, m),
+            Some(why) => {
+                limits.push(report::Limitation::new(
+                    "joint_calibration",
+                    format!(
+                        "the model recalibrated jointly with the verdict's effect(s) is not physical ({why}): the parameter face and the output error use the calibrated model alone"
+                    ),
+                ));
+                (face, opts.model.clone())
+            }
+        }
     };
     let st = Stage {
         rec,
@@ -430,7 +578,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     // 5. where the gap lies
     let place = locate::locate(&st, &decision);
     // 6. how far it closes once the verdict's effect is added
-    let far = howfar::how_far(&st, &decision, &joint_model, &mut timing)?;
+    let far = howfar::how_far(&st, &decision, &joint_model, &mut timing, &mut limits);
     let report = report::assemble(report::Parts {
         opts,
         rows: &rows,
@@ -446,6 +594,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         row_noise,
         seconds: wall.elapsed().as_secs_f64(),
         timing: timing.stages,
+        limitations: limits,
     });
     let plots = report::plot_data(&report, &rows, &spans, place.plots, far.envelopes);
     Ok(Diagnosis { report, plots })

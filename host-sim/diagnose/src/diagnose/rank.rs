@@ -6,6 +6,7 @@
 use paragyro_simulator::effects::{Effect, LIBRARY, Signature};
 
 use super::columns::Columns;
+use super::locate::nan_low;
 use super::lsq::{Bank, Fit, corr_length};
 use super::report::Candidate;
 use super::rows::{Rows, Spans};
@@ -126,11 +127,9 @@ pub(crate) fn rank(cols: &Columns, rows: &Rows, spans: &Spans, fits: &Fits) -> V
             }
         }
     }
-    ranking.sort_by(|a, b| {
-        b.gap_closure
-            .partial_cmp(&a.gap_closure)
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
+    // best first, a closure that is not a number last (a total order: a comparator that
+    // calls NaN equal to everything is not one, and the sort may panic on it)
+    ranking.sort_by(|a, b| nan_low(b.gap_closure).total_cmp(&nan_low(a.gap_closure)));
     ranking.extend(cols.untestable.iter().map(|(effect, why)| Candidate {
         effect: *effect,
         size: None,

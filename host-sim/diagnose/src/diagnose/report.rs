@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use paragyro_core::physics::rate_dps_from_gamma;
 use paragyro_simulator::effects::Effect;
+use paragyro_simulator::record::Record;
 use serde::{Deserialize, Serialize};
 
 pub use super::calibrate::ParameterFace;
@@ -165,6 +166,28 @@ pub struct Separation {
     pub excitation: String,
 }
 
+/// A stage of the diagnosis that could not run as designed on this record, and what was
+/// done instead (report.json's `limitations`, absent when there is none): the diagnosis
+/// is total over the records the reader accepts, and an internal inconsistency or an
+/// estimate that is not physical becomes one of these, never an abort.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Limitation {
+    /// The stage (`calibration`, `confirmation`, `joint_calibration`, `output_error`, …).
+    pub stage: String,
+    /// What happened and what the diagnosis did instead.
+    pub detail: String,
+}
+
+impl Limitation {
+    /// A limitation of `stage`.
+    pub fn new(stage: &str, detail: impl Into<String>) -> Self {
+        Limitation {
+            stage: stage.into(),
+            detail: detail.into(),
+        }
+    }
+}
+
 /// report.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Report {
@@ -223,6 +246,10 @@ pub struct Report {
     pub seconds: f64,
     /// Wall time per stage, s.
     pub timing_s: BTreeMap<String, f64>,
+    /// The stages that could not run as designed on this record ([`Limitation`]); absent
+    /// from report.json when there is none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub limitations: Vec<Limitation>,
 }
 
 impl Report {
@@ -285,6 +312,8 @@ pub(crate) struct Parts<'a> {
     pub row_noise: [f64; super::NR],
     pub seconds: f64,
     pub timing: BTreeMap<String, f64>,
+    /// The stages that could not run as designed.
+    pub limitations: Vec<Limitation>,
 }
 
 /// The report from the stages' results.
@@ -345,6 +374,95 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
         samples: t.len(),
         seconds: p.seconds,
         timing_s: p.timing,
+        limitations: p.limitations,
+    }
+}
+
+/// The report of a record no stage of the diagnosis can take (`why`): verdict `unknown`,
+/// nothing ranked, fitted or located, and the reason as the one limitation (stage
+/// `record`). report.md and the (empty) plots are written from it as from any other.
+pub fn not_diagnosed(rec: &Record, opts: &Options, why: &str, seconds: f64) -> Diagnosis {
+    let t0 = rec.rows.first().map_or(0.0, |r| r.t_s);
+    let t1 = rec.rows.last().map_or(0.0, |r| r.t_s);
+    let table = !rec.rows.is_empty()
+        && rec
+            .rows
+            .iter()
+            .all(|r| r.rate_ref_dps.is_some_and(f64::is_finite));
+    let report = Report {
+        format: FORMAT.into(),
+        verdict: Verdict::Unknown,
+        ranking: Vec::new(),
+        gap_before: 0.0,
+        gap_after: 0.0,
+        gap_closure: 0.0,
+        gap_fraction_of_baseline: 0.0,
+        unexplained_above_noise: 0.0,
+        unexplained_rows: Vec::new(),
+        closest_library_effect: Answer::Unknown,
+        held_out_by_row: Vec::new(),
+        energies: Energies {
+            note: "not computed: the record could not be diagnosed (limitations)".into(),
+            baseline: 0.0,
+            catch_all: 0.0,
+            floor: 0.0,
+            after: 0.0,
+            rows: 0,
+        },
+        output_error: None,
+        parameter_face: ParameterFace {
+            parameters: Vec::new(),
+            hypotheses: Vec::new(),
+            rate_offset_dps: None,
+            noise_energy_ratio: 0.0,
+            resimulations: 0,
+        },
+        confirmation: Vec::new(),
+        residual_over_noise: 0.0,
+        noise_per_row: Vec::new(),
+        location: Where {
+            axis: super::locate::AxisShare {
+                drive: 0.0,
+                sense: 0.0,
+            },
+            channel: BTreeMap::new(),
+            regime: Vec::new(),
+            time: TimeSpan {
+                half_of_gap_within_s: [t0, t1],
+                fraction_of_time_holding_half: 0.0,
+                cusum_extreme_at_s: t0,
+            },
+        },
+        model: opts.model.source.clone(),
+        rate: if table {
+            Rate::Table
+        } else {
+            Rate::Fitted { rate_dps: None }
+        },
+        spans_s: SpansReport {
+            fit: [t0, t0],
+            guard_s: GUARD_S,
+            held_out: [t1, t1],
+        },
+        thresholds: Thresholds::current(),
+        vibration_beat_scan: BeatScan {
+            range_hz: VIB_BEAT_MAX_HZ,
+            best_hz: 0.0,
+        },
+        separating_excitation: Vec::new(),
+        samples: rec.rows.len(),
+        seconds,
+        timing_s: BTreeMap::new(),
+        limitations: vec![Limitation::new(
+            "record",
+            format!(
+                "the record cannot be diagnosed: {why}; nothing was fitted, the verdict is `unknown`"
+            ),
+        )],
+    };
+    Diagnosis {
+        report,
+        plots: PlotData::default(),
     }
 }
 

@@ -273,6 +273,12 @@ pub fn output_error(
     let mut prev: Option<[f64; 10]> = None;
     for k in span {
         let e = err(k);
+        // a row the reader kept with a non-finite value (or a re-simulation that left
+        // one): not counted
+        if !e.iter().all(|v| v.is_finite()) {
+            prev = None;
+            continue;
+        }
         ex += e[..5].iter().map(|v| v * v).sum::<f64>();
         ey += e[5..].iter().map(|v| v * v).sum::<f64>();
         if let Some(p) = prev {
@@ -356,16 +362,31 @@ impl Resim<'_> {
                 ay: ok(r.ay_mps2, 0.0) / accel_si,
             }
         };
-        let start = if k0 == 0 {
+        let mut start = if k0 == 0 {
             0
         } else {
             k0.saturating_sub((RESIM_OVERLAP_S * h.fs_hz) as usize)
         };
+        // a chunk starts from the record's state: from a row whose state is finite (a row
+        // the reader kept with a non-finite value moves the start earlier)
+        while start > 0
+            && !state_of(&rec.rows[start], psi[start], input(start).omega, h.l0_um)
+                .iter()
+                .all(|v| v.is_finite())
+        {
+            start -= 1;
+        }
         let first = &rec.rows[start];
         let z0 = if start == 0 && first.x_abs(1) < 0.05 * h.l0_um {
             [0.01, 0.0, 0.0, 0.0] // from rest: the simulator's start-up convention
         } else {
             state_of(first, psi[start], input(start).omega, h.l0_um)
+        };
+        // (the first row not finite: from rest)
+        let z0 = if z0.iter().all(|v| v.is_finite()) {
+            z0
+        } else {
+            [0.01, 0.0, 0.0, 0.0]
         };
         let mut sim = GyroSim::new(&simcfg, z0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
         sim.set_effects(fx, TAU * (f_ref + fx.vib_beat_hz) / omega0);

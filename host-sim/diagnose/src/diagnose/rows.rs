@@ -105,7 +105,12 @@ pub(crate) fn run_pass(
         p.theta.push(th);
         p.env.push(e);
         p.known.push(*est.last_known());
-        p.usable.push(o.updated && y.iter().all(|v| v.is_finite()));
+        // a row the reader kept with a non-finite value (NaN, ∞) is never a usable row
+        p.usable.push(
+            o.updated
+                && y.iter().all(|v| v.is_finite())
+                && r.required().iter().all(|v| v.is_finite()),
+        );
     }
     Ok(p)
 }
@@ -122,13 +127,20 @@ pub(crate) fn psi_of(rec: &Record) -> Vec<f64> {
     let mut p = 0.0f64;
     let mut prev: Option<(f64, f64)> = None;
     for r in &rec.rows {
+        // a non-finite pump frequency (a row the reader kept) holds the last finite one:
+        // the phase goes on instead of turning NaN for the rest of the record
+        let f = match (r.pump_hz.is_finite(), prev) {
+            (true, _) => r.pump_hz,
+            (false, Some((_, f0))) => f0,
+            (false, None) => first_pump_hz(rec),
+        };
         if let Some((t0, f0)) = prev {
             let dt = r.t_s - t0;
-            p += PI * 0.5 * (f0 + r.pump_hz) * dt; // ψ' = Ω = π·pump_hz
+            p += PI * 0.5 * (f0 + f) * dt; // ψ' = Ω = π·pump_hz
             p = paragyro_simulator::plant::wrap_phase(p);
         }
         psi.push(p);
-        prev = Some((r.t_s, r.pump_hz));
+        prev = Some((r.t_s, f));
     }
     psi
 }

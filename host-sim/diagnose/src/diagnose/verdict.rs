@@ -294,9 +294,13 @@ fn secondary(
         let f = fits
             .bank
             .fit(&cols.with(&c1.iter().chain(c2.iter()).copied().collect::<Vec<_>>()));
-        let k = cols.base_cols.len() + c1.len();
+        // the second effect's first coefficient, by its column (not a position the fit
+        // may not hold)
+        let Some(a) = c2.first().and_then(|c| f.cols.iter().position(|j| j == c)) else {
+            continue;
+        };
         let add = fits.share(e1 - f.e_hold);
-        let tstat = f.beta[k].abs() / f.sigma[k].max(1e-300);
+        let tstat = f.beta[a].abs() / f.sigma[a].max(1e-300);
         if add >= SECOND_MIN
             && tstat >= T_SIG
             && best.as_ref().is_none_or(|s| add > s.added_closure)
