@@ -74,9 +74,8 @@ pub struct RlsConfig {
     pub relinearize_s: f64,
     /// Drift tracking (module `drift`): the natural-frequency terms θ12, θ22 walk with a
     /// variance of κ² times their measured drift per update squared, so that a warm-up is
-    /// followed as a drift, not detected as a jump. 0 (the default) disables it; 3 is the
-    /// design value (`host-sim/scenarios/warm-up.toml`). Off by default while the firmware
-    /// loop's rate targets are not met with it on (core CHANGELOG).
+    /// followed as a drift, not detected as a jump. 3 (the default) holds the lag a drift
+    /// leaves at a third of the noise (module `drift`); 0 disables it.
     pub drift_kappa: f64,
     /// Time constant of the measured drift (the velocity's integration), s.
     pub drift_window_s: f64,
@@ -252,7 +251,7 @@ const TABLE2_CONFIG: Config = Config {
         p_reset: 1.0,
         trace_bound_factor: 10.0,
         relinearize_s: 0.1,
-        drift_kappa: 0.0,
+        drift_kappa: 3.0,
         drift_window_s: 1.0,
         drift_max_ppm_s: 100.0,
     },

@@ -175,6 +175,15 @@ impl<T: Real> Estimator<T> {
         self.state.counters
     }
 
+    /// The drift of θ12 (drive) and θ22 (sense) that the drift tracker measures and
+    /// follows, relative to each parameter's design value per second (ppm/s; module
+    /// [`crate::drift`]); 0 where none stands out of the noise, and with the tracker off.
+    pub fn drift_ppm_s(&self) -> [f64; 2] {
+        let d = &self.design;
+        let per_s = d.cfg.fs_hz * 1e6;
+        [0, 1].map(|axis| self.state.drift.drift(&d.fit.drift, axis).to_f64() * per_s)
+    }
+
     /// Samples processed.
     pub fn samples(&self) -> u64 {
         self.state.k

@@ -194,6 +194,26 @@ fn json_number(text: &str, key: &str) -> f64 {
 /// The rate channel's bandwidth (Hz), the step's largest error after 25 ms (% of the
 /// step), the ramp's scale-factor error (ppm) and nonlinearity (ppm FS), as the datasheet
 /// rounds them: what `paragyro-sim rate-response` measures (f32, seed 1).
+/// What `paragyro-sim thermal` (its default, the warm-up scenario) prints: its report.
+fn thermal_source() -> String {
+    use paragyro_simulator::runner::{Precision, RunOptions, run};
+    use paragyro_simulator::scenario::Scenario;
+    use paragyro_simulator::thermal::ThermalReport;
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../host-sim/scenarios/warm-up.toml"
+    );
+    let sc = Scenario::from_file(std::path::Path::new(path)).expect("warm-up.toml");
+    let opts = RunOptions {
+        precision: Precision::F32,
+        seed: None,
+    };
+    let r = run(&sc, &opts, &mut |_| {}).expect("warm-up run");
+    ThermalReport::of(&sc, &r.trace)
+        .expect("thermal report")
+        .markdown()
+}
+
 fn rate_source() -> String {
     use paragyro_simulator::rate_response::{Options, chirp, ramp, step};
     let o = Options {
@@ -237,6 +257,7 @@ fn the_headline_table_is_what_its_sources_give() {
         .any(|r| r.2.contains("paragyro-sim -- rate-response"))
         .then(|| std::thread::spawn(rate_source));
     let mut rate: Option<String> = None;
+    let mut thermal: Option<String> = None;
     let mut bad = Vec::new();
     for (figure, value, source) in &rows {
         let (src, partial) = if source.contains("paragyro-sim -- results") {
@@ -246,6 +267,8 @@ fn the_headline_table_is_what_its_sources_give() {
                 rate = rate_run.take().map(|h| h.join().expect("rate-response"));
             }
             (rate.as_deref().unwrap_or(""), false)
+        } else if source.contains("paragyro-sim -- thermal") {
+            (thermal.get_or_insert_with(thermal_source).as_str(), false)
         } else if source.contains("paragyro-fil -- budget") {
             (budget.as_str(), !measured)
         } else if source.contains("--example blind -- 100 6868") {

@@ -24,7 +24,6 @@ fn warm_up() -> Scenario {
 #[test]
 fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
     let mut sc = warm_up();
-    assert_eq!(sc.estimator.drift_kappa, Some(3.0));
     let r = run_f32(&sc);
     let first = &r.trace[0];
     let last = r.trace.last().expect("a trace");
@@ -58,8 +57,7 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
         .fold(0.0, f64::max);
     assert!(worst < 3e-6, "ω̂y² {worst:e} off during the warm-up");
 
-    // the same warm-up without drift tracking (the core's default): the detector reads
-    // it as jumps
+    // the same warm-up without drift tracking: the detector reads it as jumps
     sc.estimator.drift_kappa = Some(0.0);
     let off = run_f32(&sc);
     let resets = off.trace.last().expect("a trace").resets;
@@ -68,9 +66,8 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
 
 #[test]
 fn a_jump_of_the_sense_frequency_is_still_detected_and_retuned() {
-    // drift-retune with its ωy² change made a jump: +0.3 % within 10 ms, drift tracking on
+    // drift-retune with its ωy² change made a jump: +0.3 % within 10 ms
     let mut sc = Scenario::builtin("drift-retune").expect("built in");
-    sc.estimator.drift_kappa = Some(3.0);
     for e in &mut sc.events {
         if let EventKind::Ramp { to, duration_s, .. } = &mut e.kind {
             *to = 1.0265 * 1.003;
@@ -100,4 +97,34 @@ fn a_jump_of_the_sense_frequency_is_still_detected_and_retuned() {
     let amp = r.summary.measures["sense_amp_after_retune"].expect("measured");
     // the pump back at 2ω_y: the sense amplitude of `drift-retune` after its retune
     assert!(amp > 1.6, "sense amplitude after the retune {amp}");
+}
+
+#[test]
+fn the_thermal_report_reads_the_warm_up() {
+    let sc = warm_up();
+    let r = run_f32(&sc);
+    let t = paragyro_simulator::thermal::ThermalReport::of(&sc, &r.trace).expect("a report");
+    assert_eq!((t.change_s, t.temp_c), ((5.0, 25.0), (25.0, 35.0)));
+    assert_eq!(t.resets_after_startup, 0);
+    assert_eq!(t.bins.len(), 10);
+    assert!(t.bins.iter().all(|b| b.samples == 1000));
+    // the drift the core follows is the truth's: 2·33 ppm/K × 0.5 K/s = 33 ppm/s
+    assert!(
+        (t.wy2_rate_max_ppm_s - 33.0).abs() < 0.1,
+        "{}",
+        t.wy2_rate_max_ppm_s
+    );
+    assert!(
+        (t.drift_th22_max_ppm_s / t.wy2_rate_max_ppm_s - 1.0).abs() < 0.2,
+        "followed {} ppm/s",
+        t.drift_th22_max_ppm_s
+    );
+    let md = t.markdown();
+    assert!(
+        md.contains("| covariance resets after start-up | 0 |"),
+        "{md}"
+    );
+    // a scenario without a temperature profile has no thermal report
+    let plain = Scenario::builtin("drift-retune").expect("built in");
+    assert!(paragyro_simulator::thermal::ThermalReport::of(&plain, &r.trace).is_err());
 }

@@ -268,6 +268,7 @@ impl<T: Real> State<T> {
         }
         if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
             self.last_reset = k;
+            self.drift.clear();
             self.warm_first = false;
             self.change_pending = true;
             self.settle.clear();

@@ -90,6 +90,9 @@ enum Command {
     Soak(cmd::soak::Args),
     /// The rate channel's datasheet: step, chirp (bandwidth), sines, ±300 °/s ramp, g-sensitivity, noise vs CRLB.
     RateResponse(cmd::rate_response::Args),
+    /// A run through a temperature profile (default: a 10 K warm-up) and its thermal report:
+    /// resets, the rate's validity and error, the pump against 2·f_y, per kelvin.
+    Thermal(cmd::thermal::Args),
 }
 
 fn main() -> ExitCode {
@@ -138,6 +141,7 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Faults(a) => faults::exec(a, ctx),
         Command::Soak(a) => soak::exec(a, ctx),
         Command::RateResponse(a) => rate_response::exec(a, ctx),
+        Command::Thermal(a) => thermal::exec(a, ctx),
     }
 }
 

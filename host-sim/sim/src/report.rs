@@ -115,7 +115,8 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
 /// th1*_est, th2*_est, `<phys>_true`, `<phys>_est`, rate_dps_true, rate_dps_est, drive_amp_um,
 /// sense_amp_um, one 0/1 column per health flag, resets, bad_samples, then the rate channel:
 /// rate_dps_slow, quadrature_dps, rate_valid (0/1), then the die temperature temp_c (°C; NaN
-/// without a `[temperature]` profile). `rate_dps_est` is the fast rate.
+/// without a `[temperature]` profile) and the drift the core follows on θ12 and θ22,
+/// drift_th12_ppm_s, drift_th22_ppm_s. `rate_dps_est` is the fast rate.
 pub fn csv_header() -> Vec<String> {
     let mut h: Vec<String> = ["t_s", "pump_hz", "pump_centre_hz", "pump_scale"]
         .iter()
@@ -137,7 +138,17 @@ pub fn csv_header() -> Vec<String> {
     h.extend(HEALTH_NAMES.iter().map(|n| n.to_string()));
     h.push("resets".into());
     h.push("bad_samples".into());
-    h.extend(["rate_dps_slow", "quadrature_dps", "rate_valid", "temp_c"].map(String::from));
+    h.extend(
+        [
+            "rate_dps_slow",
+            "quadrature_dps",
+            "rate_valid",
+            "temp_c",
+            "drift_th12_ppm_s",
+            "drift_th22_ppm_s",
+        ]
+        .map(String::from),
+    );
     h
 }
 
@@ -191,8 +202,10 @@ fn csv_row(r: &TraceRow, out: &mut String) {
         out.push_str(&fmt_f64(x));
     }
     out.push_str(if r.rate_valid { ",1" } else { ",0" });
-    out.push(',');
-    out.push_str(&fmt_f64(r.temp_c));
+    for x in [r.temp_c, r.drift_ppm_s[0], r.drift_ppm_s[1]] {
+        out.push(',');
+        out.push_str(&fmt_f64(x));
+    }
 }
 
 fn write_csv(path: &Path, rows: &[TraceRow]) -> Result<()> {

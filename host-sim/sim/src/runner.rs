@@ -526,6 +526,7 @@ pub fn simulate<T: Real>(
                 quadrature_dps: ls.out.rate.quadrature_dps,
                 rate_valid: ls.out.rate.valid,
                 temp_c: sc.temp_c(ls.t_s).unwrap_or(f64::NAN),
+                drift_ppm_s: ls.est.drift_ppm_s(),
             });
             for (bit, what) in EVENT_NAMES {
                 if ls.out.events & bit != 0 {

@@ -101,6 +101,9 @@ pub struct TraceRow {
     pub rate_valid: bool,
     /// The die temperature, °C (NaN without a `[temperature]` profile).
     pub temp_c: f64,
+    /// The drift of θ12 and θ22 the core's drift tracker follows, ppm/s of |θ_design|
+    /// (`Estimator::drift_ppm_s`; θ12, θ22 carry −ω², so a falling frequency drifts up).
+    pub drift_ppm_s: [f64; 2],
 }
 
 /// Something that happened during a run (change detected, retune started, ...).

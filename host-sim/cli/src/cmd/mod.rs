@@ -20,6 +20,7 @@ pub mod replay;
 pub mod results;
 pub mod run;
 pub mod soak;
+pub mod thermal;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -431,21 +431,20 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     }
 }
 
-/// The stages of [`diagnose`]; an error when the record cannot be taken at all.
-fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Result<Diagnosis> {
-    let mut timing = Timing::new();
-    let mut limits: Vec<report::Limitation> = Vec::new();
-    // 1. the rows and 1b. the calibration (the parameter face)
-    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing, &mut limits)?;
-    // the calibration's refinement is part of the model: the structural face starts from
-    // the gap it leaves
-    rows.remove_theta(&fit1.dtheta);
-    // the simulator's lock-in noise at the reference density: the record's noise level is
-    // measured against it (ν²), and each row's noise level is it through this record's rows
-    let e1 = resim::lockin_noise_diff_energy(rec)?;
+/// The record's noise level against the simulator's lock-in noise (ν²) and each row's noise
+/// level through this record's rows; a level that cannot be estimated is a limitation and
+/// its reference value is taken.
+fn noise_levels(
+    rec: &Record,
+    rows: &rows::Rows,
+    spans: &rows::Spans,
+    dtheta: &[f64; 14],
+    e1: &[f64; 10],
+    limits: &mut Vec<report::Limitation>,
+) -> (f64, [f64; NR]) {
     let nu2 = match &rows.before_sim {
         Some(sim) => {
-            match resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, &e1) {
+            match resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, e1) {
                 Ok(v) if v.is_finite() && v > 0.0 => v,
                 Ok(v) => {
                     limits.push(report::Limitation::new(
@@ -465,7 +464,7 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
         }
         None => 1.0,
     };
-    let row_noise = match noise::row_noise(rec, &rows, &fit1.dtheta, &e1, spans.hold.clone()) {
+    let row_noise = match noise::row_noise(rec, rows, dtheta, e1, spans.hold.clone()) {
         Ok(v) if v.iter().all(|x| x.is_finite() && *x > 0.0) => v,
         r => {
             limits.push(report::Limitation::new(
@@ -478,6 +477,22 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
             NOISE_ROW_PROFILE.map(|p| p * NOISE_ROW_ENERGY)
         }
     };
+    (nu2, row_noise)
+}
+
+/// The stages of [`diagnose`]; an error when the record cannot be taken at all.
+fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Result<Diagnosis> {
+    let mut timing = Timing::new();
+    let mut limits: Vec<report::Limitation> = Vec::new();
+    // 1. the rows and 1b. the calibration (the parameter face)
+    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing, &mut limits)?;
+    // the calibration's refinement is part of the model: the structural face starts from
+    // the gap it leaves
+    rows.remove_theta(&fit1.dtheta);
+    // the simulator's lock-in noise at the reference density: the record's noise level is
+    // measured against it (ν²), and each row's noise level is it through this record's rows
+    let e1 = resim::lockin_noise_diff_energy(rec)?;
+    let (nu2, row_noise) = noise_levels(rec, &rows, &spans, &fit1.dtheta, &e1, &mut limits);
     timing.tick("row_noise");
     let cfg_model = opts.model.clone();
     let (face, _device) = calibrate::face(

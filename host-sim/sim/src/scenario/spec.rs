@@ -370,8 +370,8 @@ pub struct EstimatorSpec {
     /// The slow RLS's rate random walk per sample, °/s (core `rate.walk_dps`); `None`:
     /// the core's default.
     pub rate_walk_dps: Option<f64>,
-    /// Drift tracking's κ (core `rls.drift_kappa`, module `drift`; 0 off, 3 the design
-    /// value); `None`: the core's default (off).
+    /// Drift tracking's κ (core `rls.drift_kappa`, module `drift`; 0 off); `None`: the
+    /// core's default (3).
     pub drift_kappa: Option<f64>,
     /// Nominal (design) parameters.
     pub nominal: NominalSpec,

@@ -1,0 +1,345 @@
+//! The thermal report of a run through a temperature profile (`paragyro-sim thermal`):
+//! how the core holds while the device's frequencies move with its die temperature.
+//!
+//! From a run of a scenario with a `[temperature]` profile: the covariance resets after
+//! start-up, the rate's validity and error before and during the temperature's change, the
+//! identified ω̂y² against the truth, the pump centre against twice the sense resonance, the
+//! drift the core followed, and the same per kelvin of die temperature (a table and
+//! `thermal.png`).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Result, bail};
+use plotters::prelude::{BLACK, BLUE, RED};
+use serde::Serialize;
+
+use crate::plot::{Line, Panel, draw_panel, figure, grid};
+use crate::scenario::Scenario;
+use crate::trace::TraceRow;
+
+/// Start-up excluded from every figure, s (the identification converges, the dither starts).
+pub const STARTUP_S: f64 = 2.5;
+
+/// One kelvin of die temperature during the change.
+#[derive(Clone, Debug, Serialize)]
+pub struct KelvinBin {
+    /// The bin's centre, °C.
+    pub temp_c: f64,
+    /// Samples in it.
+    pub samples: usize,
+    /// Share of them with the rate flagged valid.
+    pub valid: f64,
+    /// Mean and rms of the rate error (fast channel − truth), °/s.
+    pub rate_err_mean_dps: f64,
+    pub rate_err_rms_dps: f64,
+    /// Mean pump centre − 2·f_y (the sense resonance), Hz.
+    pub pump_offset_mean_hz: f64,
+}
+
+/// The thermal figures of one run.
+#[derive(Clone, Debug, Serialize)]
+pub struct ThermalReport {
+    /// The scenario's name.
+    pub scenario: String,
+    /// When the die temperature changes, s (first to last move of the profile).
+    pub change_s: (f64, f64),
+    /// The die temperature at its start and end, °C.
+    pub temp_c: (f64, f64),
+    /// Covariance resets after start-up ([`STARTUP_S`]).
+    pub resets_after_startup: u32,
+    /// Share of the samples with the rate flagged valid: during the change, and from
+    /// start-up to the change.
+    pub valid_during: f64,
+    pub valid_before: f64,
+    /// rms of the rate error before and during the change, and its largest magnitude
+    /// during it (every sample, valid or not), °/s.
+    pub rate_err_rms_before_dps: f64,
+    pub rate_err_rms_during_dps: f64,
+    pub rate_err_max_during_dps: f64,
+    /// Largest |ω̂y² − ωy²| during the change.
+    pub wy2_err_max: f64,
+    /// Largest |pump centre − 2·f_y| during the change, Hz.
+    pub pump_offset_max_hz: f64,
+    /// Largest drift of θ22 the core followed, ppm/s, and the truth's ωy² rate, ppm/s.
+    pub drift_th22_max_ppm_s: f64,
+    pub wy2_rate_max_ppm_s: f64,
+    /// Per kelvin of die temperature during the change.
+    pub bins: Vec<KelvinBin>,
+}
+
+fn rms(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        (s / n as f64).sqrt()
+    }
+}
+
+fn share(rows: &[&TraceRow]) -> f64 {
+    if rows.is_empty() {
+        return f64::NAN;
+    }
+    rows.iter().filter(|r| r.rate_valid).count() as f64 / rows.len() as f64
+}
+
+/// Twice the sense resonance, Hz: 2·f0·√ωy² (ωy² non-dimensional, f0 the drive's).
+fn pump_target_hz(sc: &Scenario, r: &TraceRow) -> f64 {
+    2.0 * sc.sim.f0_hz * r.phys_true[4].sqrt()
+}
+
+impl ThermalReport {
+    /// The figures of a run of `sc` (which must have a `[temperature]` profile that moves).
+    pub fn of(sc: &Scenario, trace: &[TraceRow]) -> Result<Self> {
+        let Some(tp) = &sc.temperature else {
+            bail!(
+                "scenario '{}' has no [temperature] profile: a thermal report needs one (host-sim/scenarios/README.md)",
+                sc.name
+            );
+        };
+        let moves: Vec<f64> = tp
+            .points
+            .windows(2)
+            .filter(|w| w[1][1] != w[0][1])
+            .flat_map(|w| [w[0][0], w[1][0]])
+            .collect();
+        let (Some(&t0), Some(&t1)) = (
+            moves.iter().min_by(|a, b| a.total_cmp(b)),
+            moves.iter().max_by(|a, b| a.total_cmp(b)),
+        ) else {
+            bail!("scenario '{}': its die temperature never changes", sc.name);
+        };
+        let t0 = t0.max(STARTUP_S);
+        let t1 = t1.min(sc.duration_s);
+        if t1 <= t0 {
+            bail!(
+                "scenario '{}': the temperature changes only before start-up ends ({STARTUP_S} s) or after the run",
+                sc.name
+            );
+        }
+        let during: Vec<&TraceRow> = trace.iter().filter(|r| (t0..t1).contains(&r.t_s)).collect();
+        let before: Vec<&TraceRow> = trace
+            .iter()
+            .filter(|r| (STARTUP_S..t0).contains(&r.t_s))
+            .collect();
+        let err = |r: &&TraceRow| r.rate_dps_est - r.rate_dps_true;
+        let resets_at = |t: f64| trace.iter().find(|r| r.t_s >= t).map_or(0, |r| r.resets);
+        let last = trace.last().map_or(0, |r| r.resets);
+        let wy2_rate = during
+            .windows(2)
+            .map(|w| {
+                let dt = w[1].t_s - w[0].t_s;
+                ((w[1].phys_true[4] / w[0].phys_true[4] - 1.0) / dt * 1e6).abs()
+            })
+            .fold(0.0, f64::max);
+        let mut bins: Vec<KelvinBin> = Vec::new();
+        let (lo, hi) = during
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), r| {
+                (l.min(r.temp_c), h.max(r.temp_c))
+            });
+        if lo.is_finite() && hi.is_finite() {
+            let mut k = lo.floor();
+            while k < hi {
+                let rows: Vec<&TraceRow> = during
+                    .iter()
+                    .copied()
+                    .filter(|r| r.temp_c >= k && r.temp_c < k + 1.0)
+                    .collect();
+                if !rows.is_empty() {
+                    let n = rows.len() as f64;
+                    bins.push(KelvinBin {
+                        temp_c: k + 0.5,
+                        samples: rows.len(),
+                        valid: share(&rows),
+                        rate_err_mean_dps: rows.iter().map(err).sum::<f64>() / n,
+                        rate_err_rms_dps: rms(rows.iter().map(err)),
+                        pump_offset_mean_hz: rows
+                            .iter()
+                            .map(|r| r.pump_centre_hz - pump_target_hz(sc, r))
+                            .sum::<f64>()
+                            / n,
+                    });
+                }
+                k += 1.0;
+            }
+        }
+        Ok(ThermalReport {
+            scenario: sc.name.clone(),
+            change_s: (t0, t1),
+            temp_c: (tp.temp_c(t0), tp.temp_c(t1)),
+            resets_after_startup: last - resets_at(STARTUP_S),
+            valid_during: share(&during),
+            valid_before: share(&before),
+            rate_err_rms_before_dps: rms(before.iter().map(err)),
+            rate_err_rms_during_dps: rms(during.iter().map(err)),
+            rate_err_max_during_dps: during.iter().map(|r| err(r).abs()).fold(0.0, f64::max),
+            wy2_err_max: during
+                .iter()
+                .map(|r| (r.phys_est[4] - r.phys_true[4]).abs())
+                .fold(0.0, f64::max),
+            pump_offset_max_hz: during
+                .iter()
+                .map(|r| (r.pump_centre_hz - pump_target_hz(sc, r)).abs())
+                .fold(0.0, f64::max),
+            drift_th22_max_ppm_s: during
+                .iter()
+                .map(|r| r.drift_ppm_s[1].abs())
+                .fold(0.0, f64::max),
+            wy2_rate_max_ppm_s: wy2_rate,
+            bins,
+        })
+    }
+
+    /// The report as Markdown: the figures, then the per-kelvin table.
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let pct = |x: f64| 100.0 * x;
+        let _ = writeln!(
+            s,
+            "# Thermal report: {}\n\nThe die temperature moves {:.2} → {:.2} °C from {:.1} s to {:.1} s \
+             (ωy² moving up to {:.1} ppm/s). Start-up ({STARTUP_S} s) excluded.\n",
+            self.scenario,
+            self.temp_c.0,
+            self.temp_c.1,
+            self.change_s.0,
+            self.change_s.1,
+            self.wy2_rate_max_ppm_s
+        );
+        let _ = writeln!(s, "| figure | value |\n|---|---|");
+        let rows = [
+            (
+                "covariance resets after start-up",
+                format!("{}", self.resets_after_startup),
+            ),
+            (
+                "rate valid: before the change / during it",
+                format!(
+                    "{:.1} % / {:.1} %",
+                    pct(self.valid_before),
+                    pct(self.valid_during)
+                ),
+            ),
+            (
+                "rate error rms: before the change / during it (every sample)",
+                format!(
+                    "{:.3} / {:.3} °/s ({:.2}×)",
+                    self.rate_err_rms_before_dps,
+                    self.rate_err_rms_during_dps,
+                    self.rate_err_rms_during_dps / self.rate_err_rms_before_dps
+                ),
+            ),
+            (
+                "largest rate error during the change",
+                format!("{:.3} °/s", self.rate_err_max_during_dps),
+            ),
+            (
+                "largest |ω̂y² − ωy²| during the change",
+                format!("{:.2e}", self.wy2_err_max),
+            ),
+            (
+                "largest |pump centre − 2·f_y| during the change",
+                format!("{:.2} Hz", self.pump_offset_max_hz),
+            ),
+            (
+                "largest θ22 drift followed (the truth's ωy² rate)",
+                format!(
+                    "{:.1} ppm/s ({:.1} ppm/s)",
+                    self.drift_th22_max_ppm_s, self.wy2_rate_max_ppm_s
+                ),
+            ),
+        ];
+        for (k, v) in rows {
+            let _ = writeln!(s, "| {k} | {v} |");
+        }
+        let _ = writeln!(
+            s,
+            "\n| die °C | samples | rate valid | rate error mean / rms, °/s | pump − 2·f_y, Hz |\n|---|---|---|---|---|"
+        );
+        for b in &self.bins {
+            let _ = writeln!(
+                s,
+                "| {:.1} | {} | {:.1} % | {:+.3} / {:.3} | {:+.2} |",
+                b.temp_c,
+                b.samples,
+                pct(b.valid),
+                b.rate_err_mean_dps,
+                b.rate_err_rms_dps,
+                b.pump_offset_mean_hz
+            );
+        }
+        s
+    }
+
+    /// `thermal.png`: the rate error, the pump's offset from twice the sense resonance and
+    /// the drift followed, against the die temperature.
+    pub fn plot(&self, sc: &Scenario, trace: &[TraceRow], path: &Path) -> Result<()> {
+        let rows: Vec<&TraceRow> = trace
+            .iter()
+            .filter(|r| (self.change_s.0..self.change_s.1).contains(&r.t_s))
+            .step_by(5)
+            .collect();
+        let x = (
+            self.temp_c.0.min(self.temp_c.1),
+            self.temp_c.0.max(self.temp_c.1),
+        );
+        let x = if x.1 > x.0 { x } else { (x.0 - 0.5, x.1 + 0.5) };
+        let span = |v: &[f64]| {
+            let (l, h) = v
+                .iter()
+                .filter(|x| x.is_finite())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                    (l.min(x), h.max(x))
+                });
+            if l.is_finite() && h > l {
+                let p = 0.05 * (h - l);
+                (l - p, h + p)
+            } else {
+                (-1.0, 1.0)
+            }
+        };
+        let panel = |cap: &str, ydesc: &str, pts: Vec<(f64, f64)>, color| {
+            let ys: Vec<f64> = pts.iter().map(|p| p.1).collect();
+            let mut p = Panel::new(cap.into(), x, span(&ys));
+            p.x_desc = Some("die temperature, °C".into());
+            p.y_desc = ydesc.into();
+            p.lines.push(Line::new(pts, color, 1));
+            p.hlines.push((0.0, BLACK, String::new()));
+            p
+        };
+        let (root, body) = figure(path, &format!("{}: through temperature", self.scenario))?;
+        let areas = grid(&body, 3, 1);
+        draw_panel(
+            &areas[0],
+            &panel(
+                "rate error (fast channel − truth)",
+                "°/s",
+                rows.iter()
+                    .map(|r| (r.temp_c, r.rate_dps_est - r.rate_dps_true))
+                    .collect(),
+                RED,
+            ),
+        )?;
+        draw_panel(
+            &areas[1],
+            &panel(
+                "pump centre − 2·f_y",
+                "Hz",
+                rows.iter()
+                    .map(|r| (r.temp_c, r.pump_centre_hz - pump_target_hz(sc, r)))
+                    .collect(),
+                BLUE,
+            ),
+        )?;
+        let p = panel(
+            "θ22 drift followed by the core",
+            "ppm/s",
+            rows.iter().map(|r| (r.temp_c, r.drift_ppm_s[1])).collect(),
+            BLUE,
+        );
+        draw_panel(&areas[2], &p)?;
+        root.present()?;
+        Ok(())
+    }
+}
