@@ -8,8 +8,7 @@
 //! and drive rows are so precise (ω̂y² to ≈ 1e-7 at 1 pm/√Hz) that a lag of a few ppm is
 //! already many standard deviations of the innovation: without this module the change
 //! detector reads every fraction of a second of a warm-up as a jump, resets the covariance
-//! and blanks the rate (a 10 K warm-up over 300 s: 670 resets, the rate valid on 4.6 % of
-//! the ramp).
+//! and blanks the rate (`paragyro-sim thermal --drift-kappa 0` shows it on a 10 K warm-up).
 //!
 //! The parameters that drift with temperature — θ12 = −(ω_x² − γ² + 2β1) and
 //! θ22 = −(ω_y² − γ²), column 1 of each axis — are random walks, the Kalman filter's process
@@ -32,9 +31,9 @@
 //! * **Lead.** The rows come out of the slow state-variable filter (10 Hz, ζ = 1), whose
 //!   group delay at DC is 2/w_f = 32 ms: the estimate describes the device that long ago.
 //!   What reads it as the device now — the fast rate channel's slow θ and the ω̂y² the
-//!   retune supervisor reads — takes it advanced by u_j over that delay (a 10 K warm-up over
-//!   40 s otherwise leaves the narrow channel's quadrature out of its gate on a quarter of
-//!   the samples).
+//!   retune supervisor reads — takes it advanced by u_j over that delay (without it, the
+//!   narrow channel's quadrature leaves its gate during a fast warm-up and the rate is
+//!   flagged invalid).
 //!
 //! A jump (a mode hop, a shock: ω_y² +0.3 % within 10 ms) moves the column by 3e-3 at once:
 //! its innovations cross the detector's threshold on the first samples, and it is reset and
