@@ -19,7 +19,7 @@
 //! | 32     | `f32`      | drive-axis lock-in scale, µm per volt at the ADC input (PGA gain 1, no offset) |
 //! | 36     | `f32`      | sense-axis lock-in scale, µm per volt |
 //! | 40     | 8 bytes    | reserved (0) |
-//! | 48     | `[f64; 40]`| the core configuration, [`cfg`] slots |
+//! | 48     | `[f64; 40]`| the core configuration, [`cfg`](mod@cfg) slots |
 //! | 368    | `[f64; 16]`| the truth of the simulation, [`truth`] slots (never given to the core) |
 //! | 496    | `u64`      | FNV-1a 64 of the sample bytes |
 //! | 504    | 8 bytes    | reserved (0) |
@@ -241,7 +241,7 @@ pub fn fnv1a64(data: &[u8]) -> u64 {
     h.0
 }
 
-/// The configuration block of `c`: the [`cfg`] slots (the fields a scenario sets), written
+/// The configuration block of `c`: the [`cfg`](mod@cfg) slots (the fields a scenario sets), written
 /// by the host's table generator (`paragyro-fw-replay`); [`config_from_slots`] is its
 /// inverse on top of [`Config::table2`].
 pub fn config_slots(c: &Config) -> [f64; CFG_SLOTS] {
@@ -283,7 +283,7 @@ pub fn config_slots(c: &Config) -> [f64; CFG_SLOTS] {
     s
 }
 
-/// The configuration whose [`cfg`] slots are `slot(i)`, every other field
+/// The configuration whose [`cfg`](mod@cfg) slots are `slot(i)`, every other field
 /// [`Config::table2`]'s: the inverse of [`config_slots`] (the reader of the block).
 pub fn config_from_slots(slot: impl Fn(usize) -> f64) -> Config {
     let s = &slot;

@@ -1,4 +1,4 @@
-//! Replay devices: [`SpiDevice`]s that speak the chips' protocols from recorded or
+//! Replay devices: [`SpiDevice`](embedded_hal::spi::SpiDevice)s that speak the chips' protocols from recorded or
 //! synthetic data, for the host tests of [`crate::app`] and the QEMU board (which has no
 //! chips).
 //!
@@ -23,7 +23,7 @@
 //! data (ADC DRDY clear, ADXL355 DATA_RDY clear) unless it was made [`looping`].
 //!
 //! Everything is `no_std`, allocation-free and panic-free; the DDS capture uses
-//! [`Cell`]s so the `SpiDevice` handed to the driver and the observer can share it.
+//! [`Cell`](core::cell::Cell)s so the `SpiDevice` handed to the driver and the observer can share it.
 //!
 //! [`looping`]: ReplayAdc::looping
 

@@ -12,7 +12,7 @@
 //! | `physical.png` | the 12 physical parameters (Figs 12–14) and the rate in °/s |
 //! | `amplitudes_pump.png` | sense/drive amplitudes (with the twin run), pump frequency and centre, retune and change-detection periods |
 //!
-//! The text summaries read the typed [`RunSummary`]: the scenario's measures whose name
+//! The text summaries read the typed [`RunSummary`](crate::summary::RunSummary): the scenario's measures whose name
 //! contains `sense_amp` are listed with their ratios, the other scalar values one group per
 //! line.
 
