@@ -49,8 +49,8 @@
 //! at the board's 125 MHz), while the core's replica of the lock-in low-pass for the frequency is
 //! first-order-hold exact: it assumes the pump sweeps *linearly* from one sample's value
 //! to the next ([`paragyro_core::lpf`]). One step per sample with the core's ZOH replica
-//! (`PumpProfile::Staircase`) costs a rate bias of +1.2 % on `identify` (README "Pump
-//! profile"), +0.9 to +1.8 % in the loop; with the FOH replica the core fails (test
+//! (`PumpProfile::Staircase`) costs a rate bias of +1.2 % on `identify` (firmware/docs/notes.md
+//! "Pump profile"), +0.9 to +1.8 % in the loop; with the FOH replica the core fails (test
 //! `a_linear_replica_on_the_stepping_dds_fails`). So each tick writes and pulses a first
 //! step and buffers a second, which [`IoUpdate::pulse_at_half_period`] applies half a
 //! period after DRDY. The steps are the means over the two halves of the linear sweep
@@ -60,10 +60,10 @@
 //! the sweep whose half means they are, and that sweep's move goes to
 //! [`Estimator::set_pump_sweep_hz`] (the replica then holds what the DDS does). Telling
 //! one value per sample cannot do that: steps that are *exactly* the half means of a
-//! sweep between told nodes confine the told pump to a grid of four words (0.93 Hz at 500 MHz),
-//! which biased the rate by ≈ +0.1 % against the host-only loop (`drift-retune`); the
-//! command's word told with the rounded steps (7f07a93) left the replica a slope one word
-//! off on every tie of the rounding, which the rate row read as a rate offset that kept
+//! sweep between told nodes would confine the told pump to a grid of four words (0.93 Hz at
+//! 500 MHz), which biases the rate's scale factor while the dither moves the pump; the
+//! command's word told with the rounded steps would leave the replica a slope one word
+//! off on every tie of the rounding, which the rate row reads as a rate offset that keeps
 //! the slow RLS gated after a rate step ([`half_steps`]). The amplitude is one step per sample, told to the core's
 //! ZOH replica of the scale (`PumpProfile::HalfSteps`): quantised to 1/1023, its own half
 //! steps could not be exact means (the amplitude steps are below one word a tick). Not
@@ -582,7 +582,7 @@ where
     /// pulses IO_UPDATE, then buffers the words 3/4 of the way (the frequency rounded to
     /// whole words with error feedback, [`half_steps`]; the amplitude the command's) for
     /// [`IoUpdate::pulse_at_half_period`]. The core keeps its replica of the two steps,
-    /// `PumpProfile::HalfSteps` (README "Pump profile": the one-step staircase biases the
+    /// `PumpProfile::HalfSteps` (firmware/docs/notes.md "Pump profile": the one-step staircase biases the
     /// rate by 1.2 %), and is told the steps exactly: the next sample's pump is the end of
     /// the sweep whose half means they are, its move [`Estimator::set_pump_sweep_hz`];
     /// after a failed write or a pulse the line cannot make, the words the DDS holds. The

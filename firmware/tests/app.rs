@@ -1086,10 +1086,10 @@ impl IoUpdate for HalfIo<'_> {
 /// The core is told the two steps exactly: the next sample's pump is the end of the
 /// sweep whose half means they are, `(3B − A)/2` words, and the sweep over the interval,
 /// `2·(B − A)` words, goes to `Estimator::set_pump_sweep_hz` (a bare estimator given
-/// those pumps and sweeps gets the same outputs). 7f07a93 told the command's word, so
-/// the replica's half means were off the steps by up to a word, by ½ word each way (the
-/// slope one word short) on every tie at the dither's steepest, and the slow RLS stayed
-/// gated after a rate step in the loop. The steps themselves are within a word of the
+/// those pumps and sweeps gets the same outputs). Telling the command's word instead
+/// would put the replica's half means off the steps by up to a word, by ½ word each way
+/// (the slope one word short) on every tie at the dither's steepest, and keep the slow RLS
+/// gated after a rate step in the loop (`half_steps`). The steps themselves are within a word of the
 /// half means of the sweep between the commands' words and their errors do not add up
 /// (error feedback: the sum stays within half a word); the references stay phase-locked.
 #[test]

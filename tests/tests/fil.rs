@@ -67,12 +67,10 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     );
     assert_eq!((s.ticks, s.bad_ticks), (5001, 0));
     // two DDS steps per sample: both pulses in the log, the rate's mean over the last
-    // second within 0.1 % on this seed (measured −0.005 %; +0.26 % with the replica of the
-    // sweep instead of the two steps, +0.91 % with one step and its ZOH replica; over
-    // seeds 1–10 −0.086 to +0.071 %, mean −0.002 %, the host-only loop's +0.031 %; with
-    // the steps exact half means of a sweep on a four-word grid, `App::half_steps_to`
-    // before, +0.02 to +0.20 %, mean +0.11 %; the steps told as the command's word,
-    // 7f07a93, −0.077 to +0.085 %, mean +0.015 %)
+    // second within 0.1 % on this seed (measured −0.005 %, +0.91 % with one step and its
+    // ZOH replica; over seeds 1–10 −0.086 to +0.071 %, mean −0.002 %, the host-only
+    // loop's +0.031 %: `cargo run --release -p paragyro-fil -- drift-retune [--pump
+    // staircase] [--seed N]`, `summary.json`)
     assert!(
         s.half_period_pulses > 1000,
         "{} half-period pulses",
@@ -100,11 +98,8 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     let over = budget::tick_guard(s.instr_mean, s.instr_max);
     assert!(over.is_empty(), "{over:?}");
     // the re-linearisation is spread over ticks (core/src/estimator/relin.rs): the
-    // costliest tick is within 3 300 of the mean (3 296 with the rate's output section; 3 275 with the two DDS steps told
-    // to the core exactly: tick 1575, the settle edge and the retune's start on one tick,
-    // 14 943; 2 432 before, 2 931 with the rate walk and the θ̂1, θ̂2 parts apart, 2 748
-    // before the walk; 2 827 with the rate channel before the tick work, 2 615 before the
-    // channel; 6 505 when it ran on one)
+    // costliest tick is within 3 300 of the mean (measured 3 296: `cargo fw-loop`,
+    // `summary.json` `instr_max` − `instr_mean`)
     assert!(
         s.instr_max as f64 - s.instr_mean <= 3_300.0,
         "max {} vs mean {}",
@@ -182,8 +177,7 @@ fn rate_step_in_the_loop() {
     // the two DDS steps told to the core exactly (`Estimator::set_pump_sweep_hz`): the
     // slow RLS takes the step as the host-only loop's does, its gate ended by the end and
     // the rate at the last tick with the host-only loop's (measured 0.04 °/s below on
-    // seeds 1–5; with the command's word told, 7f07a93, 0.86–1.03 °/s below and on this
-    // seed still gated at the end)
+    // seeds 1–5: `cargo run --release -p paragyro-fil -- rate-step --seed N`)
     assert_eq!(
         s.health_end & (1 << 6),
         0,
@@ -196,9 +190,8 @@ fn rate_step_in_the_loop() {
         s.rate_dps_est,
         s.host_only.rate_dps_est
     );
-    // the scale factor over the last second (measured +0.034 %, +0.138 % with the command's
-    // word told, −0.18 % with the four-word grid, −0.22 % with the sweep's replica; the
-    // one-step staircase with its ZOH replica +1.83 %)
+    // the scale factor over the last second (measured +0.034 %; the one-step staircase
+    // with its ZOH replica, `--pump staircase`, +1.83 %)
     assert!(
         (s.rate_dps_mean_last_s - 100.0).abs() <= 0.3,
         "rate {}",
@@ -283,12 +276,12 @@ fn the_drive_falling_out_of_its_band_is_flagged() {
 
 /// The firmware path's rate error beyond the host-only loop's, while the dither runs
 /// (0.105–0.118 °/s rms on `rate-step` seeds 1–10 with the AD9959 at 125 MHz and the wide
-/// filter's band taps, 0.230–0.233 at 500 MHz before them; README "DDS words"), is the DDS's
-/// words: with the host-only loop's pump
-/// rounded to them as the board's are (the 10-bit amplitude, the frequency's two
-/// whole-word steps with error feedback and their sweep told to the core), the two loops'
-/// rates agree sample by sample within 0.05 °/s rms (measured 0.003–0.006 on seeds 1–10;
-/// 0.003–0.020 at 500 MHz) and their means within 0.05 °/s (−0.034 to +0.020).
+/// filter's band taps; firmware/docs/notes.md "DDS words"), is the DDS's words: with the
+/// host-only loop's pump rounded to them as the board's are (the 10-bit amplitude, the
+/// frequency's two whole-word steps with error feedback and their sweep told to the core),
+/// the two loops' rates agree sample by sample within 0.05 °/s rms (measured 0.003–0.006
+/// on seeds 1–10) and their means within 0.05 °/s (−0.034 to +0.020): `cargo run --release
+/// -p paragyro-fil -- rate-step --seed N --host-amplitude-words --host-frequency-words`.
 #[test]
 fn the_dds_words_are_what_the_firmware_path_adds_to_the_rate() {
     if skip() {

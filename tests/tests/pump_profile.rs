@@ -6,7 +6,7 @@
 //! (`half-steps`, the value 1/4 and 3/4 of the way, the boards' DDS pulsed at the sample
 //! and half a period later; the scale one step) follow the sweep closely enough for the
 //! core's `HalfSteps` replica (exact for the two frequency steps, ZOH scale) and meet the
-//! scale-factor target on the host, after a retune too. README "Pump profile".
+//! scale-factor target on the host, after a retune too. firmware/docs/notes.md "Pump profile".
 
 use paragyro_core::config::PumpProfile;
 use paragyro_core::{Estimator, Sample, StepOutput};
@@ -157,10 +157,10 @@ fn drift_retune_rate_error_with(seed: u64, hooks: &mut dyn LoopHooks<f32>) -> f6
 #[test]
 fn two_steps_per_sample_keep_the_scale_factor_through_a_retune() {
     // The θ14 the slow RLS holds once the dither stops was identified while the pump
-    // moved. With the frequency replica of a linear sweep (FOH) it was 1.6 % low and the
-    // rate +0.23 % (mean over seeds 11–20, sd 0.03 %; +0.26, +0.23, +0.23 % on seeds
-    // 1–3); the replica exact for the two steps (`ReplicaChannel::update_pump`) gives
-    // +0.002 % (sd 0.044 %). The mean over three seeds, against the 0.1 % target:
+    // moved, so the frequency replica must hold the two steps: the replica of a linear
+    // sweep (FOH) leaves θ14 1.6 % low and the rate +0.23 % (seeds 11–20); the replica
+    // exact for the two steps (`ReplicaChannel::update_pump`) gives +0.002 % (sd 0.044 %).
+    // The mean over three seeds (printed with `-- --nocapture`), against the 0.1 % target:
     let errs: Vec<f64> = (1..=3).map(drift_retune_rate_error).collect();
     let mean = errs.iter().sum::<f64>() / errs.len() as f64;
     eprintln!("fw-drift-retune, half steps: rate over the last 1 s {errs:?}, mean {mean:+.2e}");
@@ -247,12 +247,9 @@ impl LoopHooks<f32> for DdsWords {
 
 #[test]
 fn the_dds_whole_words_keep_the_scale_factor_of_the_exact_steps() {
-    // The firmware's words against the unquantised steps, paired by seed (1–10). At the
-    // board's 125 MHz SYSCLK (a 0.058 Hz pump word): +0.006 % here. At 500 MHz (0.233 Hz),
-    // steps that were exact half means of a sweep between told nodes moved the told pump in
-    // multiples of four words (0.93 Hz): +0.099 % here (+0.082 % in the firmware in the
-    // loop, its ADC and accelerometer included); the told command word with the steps
-    // rounded under error feedback: −0.025 % here, −0.016 % in the loop.
+    // The firmware's words against the unquantised steps, paired by seed (1–10), at the
+    // board's 125 MHz SYSCLK (a 0.058 Hz pump word): measured +0.006 % (printed with
+    // `-- --nocapture`).
     let f0_hz = fw_drift_retune().sim.f0_hz;
     let d: Vec<f64> = (1..=10)
         .map(|seed| {
@@ -289,13 +286,10 @@ fn the_dds_whole_words_let_the_slow_rls_take_a_rate_step_as_the_exact_steps_do()
     // After the step the narrow channel's rate must stay still for a gate's length before
     // the slow RLS takes it and its gate ends (core/src/rate.rs). The exact steps: 806–824
     // gated ticks of 1 501 (seeds 1–5); the board's words (125 MHz SYSCLK) 806–824, the
-    // rate at the last tick +0.010 to +0.024 °/s off the exact steps'. At 500 MHz, the told
-    // command word with the steps' rounding
-    // errors fed back (7f07a93) made the pump's slope within the interval ½ word smaller
-    // than the told sweep's on every tie: 834–1 499 gated ticks, gated to the end on seed
-    // 1, the rate at the last tick 1.07–1.11 °/s below the exact steps' on every seed.
-    // The told word that makes the interval's mean exact: 818–828, the rate +0.30 °/s
-    // on average (−0.11 to +0.64).
+    // rate at the last tick +0.010 to +0.024 °/s off the exact steps' (printed with
+    // `-- --nocapture`). The steps are told to the core as the sweep they are the half
+    // means of (`half_steps`): a told word whose slope within the interval differs from
+    // the steps' keeps the narrow channel moving and the slow RLS gated.
     let f0_hz = fw_drift_retune().sim.f0_hz;
     let mut dr = Vec::new();
     for seed in 1..=5 {
@@ -335,10 +329,8 @@ fn rms_apart_at_the_end(a: &[f64], b: &[f64]) -> f64 {
 /// drive's ≈ 100 Hz envelope mode, which the fast rate channel reads. On `rate-step`, seed
 /// 1, the host-only loop with the board's frequency words (125 MHz SYSCLK, a 0.058 Hz pump
 /// word) reads within 0.06 °/s rms of its unrounded twin (0.027–0.031 on seeds 1–3 with
-/// `cargo run --release -p paragyro-fil --example dds_words`; 0.037–0.040 before the wide
-/// filter's band taps), and the 0.233 Hz words of a 500 MHz SYSCLK, the board's before, add
-/// more than twice as much (0.066; 0.125–0.126 before the band taps, when this test asked
-/// them for more than 0.1 °/s).
+/// `cargo run --release -p paragyro-fil --example dds_words`), and the 0.233 Hz words of a
+/// 500 MHz SYSCLK add more than twice as much (0.066).
 #[test]
 fn the_boards_dds_clock_keeps_the_frequency_words_out_of_the_rate() {
     use paragyro_fil::session::BoardPump;

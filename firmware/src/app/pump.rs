@@ -168,19 +168,17 @@ impl PumpAmplitude {
 /// The core is told the steps exactly: the next sample's pump is the end of the sweep
 /// whose half means they are, `(3B − A)/2`, and that sweep's move over the interval,
 /// `2·(B − A)`, goes to `Estimator::set_pump_sweep_hz`, so that the replica
-/// (`PumpProfile::HalfSteps`) holds what the DDS does, rounding and all. Two earlier rules
-/// told one value per sample and left the replica a pattern it could not see. Steps that
-/// were *exact* half means of a sweep between told nodes confined the told pump to a grid
-/// of four words (`p' − p = 4·(A − p)`, 0.93 Hz at 500 MHz SYSCLK), which biased the
-/// rate's scale factor by ≈ +0.1 % while the dither moved the pump (`drift-retune`). The
-/// command's word told with these steps (7f07a93) left the steps' difference from the
-/// told sweep's half means: on every tie (`command − node ≡ 2 mod 4`, each tick at the
-/// dither's steepest) the first step ½ word up and the second ½ word down, the pump's
-/// slope within the interval one word short of the told sweep's whichever way it moved;
-/// the rate row read that through the ω′ term (the replica's derivative) as a rate offset
-/// following the dither: in `rate-step` the rate at the end ≈ 1 °/s low, and the narrow
-/// channel never still enough after the step for the slow RLS's hand-over (gated to the
-/// end on 2 of 5 seeds).
+/// (`PumpProfile::HalfSteps`) holds what the DDS does, rounding and all. Telling one value
+/// per sample would leave the replica a pattern it cannot see. Steps that are *exact* half
+/// means of a sweep between told nodes confine the told pump to a grid of four words
+/// (`p' − p = 4·(A − p)`, 0.93 Hz at 500 MHz SYSCLK), which biases the rate's scale factor
+/// while the dither moves the pump. The command's word told with these steps would differ
+/// from the told sweep's half means on every tie (`command − node ≡ 2 mod 4`, each tick at
+/// the dither's steepest): the first step ½ word up and the second ½ word down, the pump's
+/// slope within the interval one word short of the told sweep's whichever way it moves;
+/// the rate row reads that through the ω′ term (the replica's derivative) as a rate offset
+/// following the dither, and after a rate step the narrow channel is not still enough for
+/// the slow RLS's hand-over.
 ///
 /// Inputs below 2^28 (every sum here then stays below 2^31); the caller checks the
 /// steps against the guard.
