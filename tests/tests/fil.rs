@@ -67,10 +67,10 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     );
     assert_eq!((s.ticks, s.bad_ticks), (5001, 0));
     // two DDS steps per sample: both pulses in the log, the rate's mean over the last
-    // second within 0.1 % on this seed (measured −0.005 %, +0.91 % with one step and its
-    // ZOH replica; over seeds 1–10 −0.086 to +0.071 %, mean −0.002 %, the host-only
-    // loop's +0.031 %: `cargo run --release -p paragyro-fil -- drift-retune [--pump
-    // staircase] [--seed N]`, `summary.json`)
+    // second within 0.1 % on this seed (measured +0.089 %; over seeds 1–10 +0.008 to
+    // +0.089 %, mean +0.052 %, the host-only loop's +0.031 %: `cargo run --release -p
+    // paragyro-fil -- drift-retune --seed N`, `summary.json`; firmware/docs/notes.md
+    // "DDS words")
     assert!(
         s.half_period_pulses > 1000,
         "{} half-period pulses",
@@ -98,8 +98,8 @@ fn drift_retune_converges_and_retunes_in_the_loop() {
     let over = budget::tick_guard(s.instr_mean, s.instr_max);
     assert!(over.is_empty(), "{over:?}");
     // the re-linearisation is spread over ticks (core/src/estimator/relin.rs): the
-    // costliest tick is within 3 300 of the mean (measured 3 296: `cargo fw-loop`,
-    // `summary.json` `instr_max` − `instr_mean`)
+    // costliest tick is within 3 300 of the mean (`cargo fw-loop`, `summary.json`
+    // `instr_max` − `instr_mean`)
     assert!(
         s.instr_max as f64 - s.instr_mean <= 3_300.0,
         "max {} vs mean {}",
@@ -176,8 +176,8 @@ fn rate_step_in_the_loop() {
     assert!((s.rate_dps_est - s.host_only.rate_dps_est).abs() <= 1.0);
     // the two DDS steps told to the core exactly (`Estimator::set_pump_sweep_hz`): the
     // slow RLS takes the step as the host-only loop's does, its gate ended by the end and
-    // the rate at the last tick with the host-only loop's (measured 0.04 °/s below on
-    // seeds 1–5: `cargo run --release -p paragyro-fil -- rate-step --seed N`)
+    // the rate at the last tick with the host-only loop's (`cargo run --release -p
+    // paragyro-fil -- rate-step --seed N`, `summary.json`)
     assert_eq!(
         s.health_end & (1 << 6),
         0,
@@ -190,8 +190,7 @@ fn rate_step_in_the_loop() {
         s.rate_dps_est,
         s.host_only.rate_dps_est
     );
-    // the scale factor over the last second (measured +0.034 %; the one-step staircase
-    // with its ZOH replica, `--pump staircase`, +1.83 %)
+    // the scale factor over the last second (measured +0.143 %; host-sim/docs/rate-channel.md)
     assert!(
         (s.rate_dps_mean_last_s - 100.0).abs() <= 0.3,
         "rate {}",
