@@ -47,7 +47,7 @@ pub struct DitherConfig {
     /// Peak fractional modulation of the pump voltage scale s = (V/V0)² that runs with
     /// the frequency dither (0 disables). θ17 (β3) is told apart from θ15 and θ16 only by
     /// how the terms scale with amplitude and with s; ±10 % of s makes its error 3× smaller
-    /// (README, "Excitation"). Smooth (sinusoidal), never stepped: amplitude steps bias
+    /// (core/docs/design-notes.md "Excitation"). Smooth (sinusoidal), never stepped: amplitude steps bias
     /// the rows (FINDINGS §3.2).
     pub scale_frac: f64,
     /// Frequency of the pump-scale modulation, Hz (incommensurate with `freq_hz`).
@@ -166,7 +166,7 @@ pub struct RateConfig {
     /// The slow RLS's rate term is a random walk of this standard deviation per sample,
     /// °/s: process noise on the sense θ24 (and, as the sense sees it move, on the drive
     /// θ14), so that a moving rate neither biases the other slow θ nor fires the change
-    /// detector (README, "Rate channel"). 0: the rate is a constant of the slow RLS.
+    /// detector (host-sim/docs/rate-channel.md). 0: the rate is a constant of the slow RLS.
     pub walk_dps: f64,
 }
 

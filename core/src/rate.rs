@@ -44,7 +44,7 @@
 //! ringing every DDS word step leaves in the drive (its ≈ 100 Hz envelope mode) was read as
 //! a rate. `F0` (of `A` and of `v`) therefore also takes the band taps,
 //! `−a·e0·F2[k] − b·e0·(F2[k] − F2[k−1])`, least squares over 5–100 Hz
-//! ([`crate::svf::band_taps`], shipped for the default design; README "DDS words"). The narrow channel
+//! ([`crate::svf::band_taps`], shipped for the default design; firmware/docs/notes.md "DDS words"). The narrow channel
 //! (40 Hz, `wT` = 0.5, `ε2` = −2 %) is left as it is.
 //!
 //! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2` with `μ̂xy = −(θ14 + θ24)/2` of the slow RLS.
@@ -80,7 +80,7 @@
 //! which waited for the gate's end). Now, once the narrow channel's rate has stayed within
 //! `rate.gate_dev_dps` of its own ≈ 0.26 s average for `rate.gate_s`, the slow estimate
 //! takes that average ([`RateState::take_handover`]: θ24 + Δ, θ14 − Δ), and the gate ends
-//! as the slow rate agrees (README, "Rate channel").
+//! as the slow rate agrees (host-sim/docs/rate-channel.md).
 //!
 //! # Validity
 //!
@@ -117,7 +117,7 @@ use crate::svf::{BAND_FS_HZ, BAND_SVF_HZ, BAND_TAPS, CSvfState, SvfCoeffs, parab
 ///
 /// With the band taps ([`crate::svf::band_taps`]) `F0` also takes `−a·e0·F2[k]` and
 /// `−b·e0·(F2[k] − F2[k−1])`, which even its ratio to the continuous filter with `F1`'s up
-/// to 100 Hz (where the ringing of every DDS word step lies; README "DDS words"). Shipped
+/// to 100 Hz (where the ringing of every DDS word step lies; firmware/docs/notes.md "DDS words"). Shipped
 /// for the default design ([`crate::svf::BAND_WT`]); another `rate.svf_hz` or `fs_hz` keeps the
 /// curvature correction alone.
 #[derive(Clone, Copy, Debug, Default)]
@@ -153,7 +153,7 @@ impl<T: Real> Curvature<T> {
 /// Corner of the output's low-pass, Hz: a second-order section on the fast rate after the
 /// row's solution. With the wide filter's double real pole (`rate.svf_hz`) and the
 /// lock-in's Butterworth it makes the rate's roll-off steeper: less noise at the same
-/// bandwidth (README, "Rate channel"). A design constant, not in [`Config`]: as a
+/// bandwidth (host-sim/docs/rate-channel.md). A design constant, not in [`Config`]: as a
 /// validated configuration field the section did not fit the stm32f405's flash budget.
 pub const POST_HZ: f64 = 100.0;
 /// Damping ζ of the output's low-pass ([`POST_HZ`]).

@@ -1,4 +1,4 @@
-//! Why the core does not use `micromath` (README, "The specified crates"): its `f32`
+//! Why the core does not use `micromath` (core/docs/design-notes.md "The specified crates"): its `f32`
 //! approximations are far coarser than what the estimator's decisions need. Measured here
 //! on the one function the core calls on the chip every tick, the square root (|A1| of the
 //! drive-lock check and the retune target 2·√ω̂y²):

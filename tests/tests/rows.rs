@@ -42,7 +42,8 @@ fn model_error_is_small_against_the_row_noise() {
     // the default excitation (5 Hz + ±10 % pump scale at 1.3 Hz) moves the envelopes faster:
     // measured 0.34 / 0.32 σ on the sense fundamental (Re / Im), 0.11 σ on the drive
     // fundamental's Im, ≤ 1e-3 σ on DC and 3rd-harmonic rows; it pays for itself
-    // (README "Excitation": θ17 error 1.0 % → 0.24 %)
+    // (core/docs/design-notes.md "Excitation": θ17 rms error 0.24 %, 1.0 % with the
+    // frequency dither alone)
     let (d, s) = model_error_in_sigma(5.0, 0.1);
     for i in 0..5 {
         assert!(d[i] < 0.2, "default: drive row {i}: {:.2e} σ", d[i]);

@@ -30,7 +30,7 @@
 //! rate transient, went through the same parts; it was removed when the slow RLS took the
 //! rate as a random walk, `rate.walk_dps`, whose code needed its flash. The hand-over that
 //! ends a long hold after a rate step moves the estimate itself, `Rls::shift` in
-//! `update`: README, "Rate channel".)
+//! `update`: host-sim/docs/rate-channel.md.)
 
 use super::design::Design;
 use super::state::State;

@@ -110,8 +110,8 @@ impl<P: embedded_hal::digital::OutputPin> HalfPeriodIo<P> {
 /// `Config::table2()` with the pump profile of this board's DDS: two frequency steps per
 /// sample, the amplitude one (`PumpProfile::HalfSteps`, with `App::set_half_steps`). The
 /// AD9959's linear-sweep mode cannot sweep as slowly as the core commands (app.rs); one
-/// step per sample with the ZOH replica reads the rate +1.2 % high on `identify` (README
-/// "Pump profile"; two steps: +0.009 %).
+/// step per sample with the ZOH replica reads the rate +1.2 % high on `identify`
+/// (firmware/docs/notes.md "Pump profile"; two steps: +0.009 %).
 fn board_config() -> Config {
     let mut cfg = Config::table2();
     cfg.pump_profile = paragyro_core::config::PumpProfile::HalfSteps;

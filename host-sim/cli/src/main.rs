@@ -6,7 +6,7 @@
 //! paragyro-sim run <scenario|file.toml> --out DIR     run, write summary.json, trace.csv, plots
 //!              [--seed N] [--precision f32|f64] [--quiet]
 //! paragyro-sim demo [--out DIR] [--precision ...]     the built-in drift-retune, with a summary
-//! paragyro-sim results                                every built-in, f32 and f64: the README table
+//! paragyro-sim results                                every built-in, f32 and f64: host-sim/README.md "Results"
 //! paragyro-sim calibrate <scenario|file.toml>         row noise (weights) with the true θ
 //!              [--from S] [--steps-per-period N]
 //! paragyro-sim averaged [--out DIR]                   seed 000's averaged model, band, sweeps

@@ -23,7 +23,7 @@ pub const WY2_TOL_NO_DRIFT: f64 = 5e-4;
 pub const WY2_FIL_VS_HOST_OF_DRIFT: f64 = 0.1;
 /// The rate estimate at the end within this fraction of the true rate (where the scenario
 /// checks the rate; the staircase pump with the ZOH replica biases the rate by +1.2 % on
-/// `identify`, README "Pump profile").
+/// `identify`, firmware/docs/notes.md "Pump profile").
 pub const RATE_TOL_FRAC: f64 = 0.02;
 /// The loop against the host-only loop: |rate(FIL) − rate(host)| at the end at most this
 /// fraction of the true rate.

@@ -1,4 +1,4 @@
-//! The README's results table, measured: every built-in scenario through the core in
+//! The results table of host-sim/README.md "Results", measured: every built-in scenario through the core in
 //! `f32` (as on the chip) and `f64` (host reference). `paragyro-sim results`.
 
 use std::fmt::Write as _;

@@ -1,6 +1,6 @@
 //! `paragyro-sim faults --ticks N --out DIR`: the fault campaign (paragyro_simulator::faults):
 //! every fault class injected into the closed loop of the f32 core, scored; writes
-//! DIR/faults.json and DIR/faults.md (the README table), progress on stderr.
+//! DIR/faults.json and DIR/faults.md (the table of host-sim/docs/reliability.md "Fault campaign"), progress on stderr.
 
 use std::path::PathBuf;
 use std::sync::Mutex;

@@ -1,5 +1,5 @@
 //! `paragyro-sim results`: every built-in scenario with the f32 and the f64 core, as the
-//! README's Markdown table.
+//! Markdown table of host-sim/README.md "Results".
 
 use super::{Ctx, EXIT_RUN, Failure, fail, note};
 

@@ -1,6 +1,6 @@
 //! The fault campaign: every [`FaultClass`] injected into the closed loop of the
 //! simulated gyro and the **f32** core, at seeded random times and sizes, and scored
-//! (`paragyro-sim faults`, README "Reliability").
+//! (`paragyro-sim faults`, host-sim/docs/reliability.md "Fault campaign").
 //!
 //! Each class runs the built-in `identify` scenario (start-up from a design 3–10 % off,
 //! pump dither from 1 s, retune on) for `ticks` samples: `warmup` clean ticks, then one
@@ -127,7 +127,7 @@ pub struct FaultsReport {
 }
 
 impl FaultsReport {
-    /// The README table (Markdown).
+    /// The campaign's table (Markdown), as in host-sim/docs/reliability.md "Fault campaign".
     pub fn table_md(&self) -> String {
         let f = |v: Option<f64>, prec: usize| match v {
             Some(x) => format!("{x:.prec$}"),

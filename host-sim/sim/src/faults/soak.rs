@@ -186,7 +186,7 @@ pub fn soak_both(
     )
 }
 
-/// The README's benchmark rows (Markdown).
+/// The soak's benchmark rows (Markdown), as in host-sim/docs/benchmarks.md.
 pub fn table_md(reps: &[SoakReport]) -> String {
     let mut t = String::from(
         "| soak | length | max θ dev from converged (component) | max ω̂y² dev | max trace drive / sense | unbounded ticks | rate err first / last window, °/s | drift, °/s/h | resets | non-finite |\n|---|---|---|---|---|---|---|---|---|---|\n",

@@ -1,4 +1,4 @@
-//! Warm start against cold start, measured on the simulated gyro (README "Reliability").
+//! Warm start against cold start, measured on the simulated gyro (host-sim/docs/reliability.md "Warm start").
 //!
 //! A cold boot runs the built-in `identify` scenario from the design values (3–10 % off
 //! the plant) with the f32 core; its snapshot at the end ([`paragyro_core::persist`]) is

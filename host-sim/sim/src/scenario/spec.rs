@@ -251,7 +251,7 @@ pub enum PumpProfileSpec {
     /// each step holds the linear sweep's mean over its half, so the pump's phase at the
     /// samples is the sweep's. The scale holds the new command over the interval (one
     /// step). The core's `PumpProfile::HalfSteps`: the replica of the two steps for the
-    /// frequency, ZOH for the scale (README "Pump profile", measured).
+    /// frequency, ZOH for the scale (firmware/docs/notes.md "Pump profile", measured).
     #[serde(rename = "half-steps")]
     HalfSteps,
 }
