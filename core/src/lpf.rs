@@ -369,8 +369,8 @@ impl<T: Real> ReplicaChannel<T> {
     }
 
     /// One sample with the slope coefficients `g1` (`coeffs.g1` or `coeffs.g1_pump`).
-    /// Not inlined: one copy for the five channels (the stm32f405 image's 64 KiB flash
-    /// budget).
+    /// Not inlined: one copy for the five channels (the stm32f405 image's 128 KiB flash
+    /// budget, firmware/README.md "Budgets").
     #[inline(never)]
     fn update_g1(&mut self, coeffs: &ReplicaCoeffs<T>, g1: &[T; MAX_ORDER], u: T) -> T {
         if coeffs.n == 4 {

@@ -15,16 +15,15 @@ use serde::Serialize;
 use crate::Summary;
 
 /// Flash budget of the stm32f405 image (the warm start included), bytes: 128 KiB, an
-/// STM32G431xB-class part (issue 30; 64 KiB before, which the warm start did not fit).
+/// STM32G431xB-class part (firmware/README.md "Budgets").
 pub const FLASH_BUDGET: u64 = 128 * 1024;
 /// Static RAM plus the stack peak, bytes.
 pub const RAM_BUDGET: u64 = 32 * 1024;
-/// The mean instructions per tick (`drift-retune` in the loop measured 11 600 when the
-/// target was first met, 11 610 with the rate flag's quadrature test; 14 675 before that
-/// work, 17 859 before the first tick work).
+/// The mean instructions per tick on `drift-retune` in the loop (the current figure: the
+/// front page's headline table; `cargo fw-loop`, `summary.json` `instr_mean`).
 pub const TICK_MEAN_TARGET: f64 = 12_000.0;
-/// The costliest tick (measured 14 346, then 14 358: tick 1575, where the supervisor starts
-/// the retune; 17 540 and 24 364 before).
+/// The costliest tick (`summary.json` `instr_max`; the current figure: the front page's
+/// headline table).
 pub const TICK_MAX_TARGET: u64 = 15_000;
 
 /// The budgets against an image and a loop summary.
@@ -93,8 +92,7 @@ mod tests {
     #[test]
     fn the_flash_guard_takes_the_warm_start_image_and_flags_128_kib_plus_one() {
         assert_eq!(FLASH_BUDGET, 131_072);
-        // the stm32f405 image with the warm start: 74 372 B, over the 64 KiB budget before;
-        // 74 428 B when it became the board's default
+        // an stm32f405 image with the warm start, over 64 KiB, is within the budget
         assert!(flash_guard(74_428).is_none());
         assert!(flash_guard(65_537).is_none());
         assert!(flash_guard(131_072).is_none());
@@ -109,7 +107,7 @@ mod tests {
         assert!(tick_guard(12_000.0, 15_000).is_empty());
         assert_eq!(tick_guard(12_001.0, 14_999).len(), 1);
         assert_eq!(tick_guard(11_000.0, 15_001).len(), 1);
-        // the values before this work are over budget
+        // both over: each guard flags its own
         assert_eq!(tick_guard(14_675.0, 17_540).len(), 2);
         assert_eq!(tick_guard(f64::NAN, 0).len(), 1);
     }
