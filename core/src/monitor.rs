@@ -274,7 +274,7 @@ impl<T: Real> SettleDesign<T> {
 
 /// Settle test on one scalar, sampled at a low rate into a ring of [`SETTLE_RING`]
 /// values, in the estimator's precision `T` (the values are `T` in the first place; in
-/// `f64` on the chip it was ~2k soft-float instructions on every 25th tick).
+/// `f64` on the chip it would be ~2k soft-float instructions on every 25th tick).
 ///
 /// Its own ring rather than `heapless::HistoryBuf` (whose `write` has bounds checks, the
 /// last ones on the tick path that kept `core::fmt` in the firmware image), and the

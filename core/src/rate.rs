@@ -33,19 +33,19 @@
 //! samples; at `wT` = 1.88 (150 Hz at 500 Hz) the sample-rate ripple of a smooth input's
 //! deviation from its chords leaves the outputs off by `ε_j u″` (`F2` by −25 %;
 //! [`crate::svf::parabola_bias`]). The pump dither modulates the envelopes by ±25–45 % at
-//! 5 Hz, and the row read that as a ≈ 0.65 °/s rate tone at the dither (∝ dither
+//! 5 Hz, and the uncorrected row reads that as a ≈ 0.65 °/s rate tone at the dither (∝ dither
 //! amplitude × frequency^2.3 and ∝ `svf_hz`^2.7; the same with no rate, with the lock-in
 //! low-pass at 100 or 200 Hz, and with a plant integrated twice as finely). Each output of
 //! the wide filter is corrected, `F_j − ε_j u″` with `u″ = F2/(1+ε2)` (a few
-//! multiply-adds per signal): the noise-free tone falls to ≈ 0.08 °/s (0.067 °/s rms
+//! multiply-adds per signal): the noise-free tone is then ≈ 0.08 °/s (0.067 °/s rms
 //! deterministic error with the band taps below). Above a few tens of Hz the correction,
 //! exact for slow curvature, leaves `F0`'s ratio to the continuous filter 2–6 % from `F1`'s
 //! at 60–100 Hz, and the row balances `2iω·F1(B)` against the quadrature's `θ23·F0(A)`: the
-//! ringing every DDS word step leaves in the drive (its ≈ 100 Hz envelope mode) was read as
-//! a rate. `F0` (of `A` and of `v`) therefore also takes the band taps,
+//! ringing every DDS word step leaves in the drive (its ≈ 100 Hz envelope mode) would be
+//! read as a rate. `F0` (of `A` and of `v`) therefore also takes the band taps,
 //! `−a·e0·F2[k] − b·e0·(F2[k] − F2[k−1])`, least squares over 5–100 Hz
-//! ([`crate::svf::band_taps`], shipped for the default design; firmware/docs/notes.md "DDS words"). The narrow channel
-//! (40 Hz, `wT` = 0.5, `ε2` = −2 %) is left as it is.
+//! ([`crate::svf::band_taps`], shipped for the default design; firmware/docs/notes.md
+//! "DDS words"). The narrow channel (40 Hz, `wT` = 0.5, `ε2` = −2 %) has no band taps.
 //!
 //! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2` with `μ̂xy = −(θ14 + θ24)/2` of the slow RLS.
 //!
@@ -53,10 +53,9 @@
 //!
 //! The slow rows resolve θ24 to ~1e-8 per sample (0.02 °/s): a rate that moves makes them
 //! inconsistent and fires the change detector. A continuous hand-over (forming the slow
-//! rows with the fast rate) was tried and is not in this version: the fast row's own
-//! model error at the pump dither (≈ 0.6 °/s at 5 Hz with `svf_hz = 150`, noise-free, with
-//! the true θ, before the curvature correction above) and the loop through the slow θ
-//! made the slow rows diverge on a 50 °/s² ramp (issue 10's note). What is here:
+//! rows with the fast rate) is not used: the fast row's own model error at the pump
+//! dither and the loop through the slow θ make the slow rows diverge on a 50 °/s² ramp
+//! (issue 10's note). What is here:
 //!
 //! * a second, narrower copy of the row (corner `rate.coupling_hz`, its dither error
 //!   ≈ 0.03 °/s) watches the rate: while its acceleration is above `rate.gate_accel_dps2`
@@ -70,16 +69,12 @@
 //!   `estimator/step.rs` `walk_rate`): the sense θ24 takes that process noise on every
 //!   update, the drive θ14 the square of the sense θ24's move, so the slow rows follow a
 //!   moving rate between gates, and the slow RLS re-identifies a drift of the device while
-//!   the rate moves, which it did not before the walk (README, "Rate channel"). The walk
-//!   replaced a hand-over at the end of each gate (the linearisation point moved to the
-//!   narrow channel's rate through the spread re-linearisation, four ticks, the slow RLS
-//!   gated until the swap), whose code the flash budget no longer left room for.
+//!   the rate moves (host-sim/docs/rate-channel.md).
 //!
 //! After a step the narrow channel's departure from the slow rate renews the gate on every
-//! sample, so the slow RLS stayed gated to the end (so it did with the first hand-over,
-//! which waited for the gate's end). Now, once the narrow channel's rate has stayed within
-//! `rate.gate_dev_dps` of its own ≈ 0.26 s average for `rate.gate_s`, the slow estimate
-//! takes that average ([`RateState::take_handover`]: θ24 + Δ, θ14 − Δ), and the gate ends
+//! sample, so without a hand-over the slow RLS would stay gated to the end. So, once the
+//! narrow channel's rate has stayed within `rate.gate_dev_dps` of its own ≈ 0.26 s
+//! average for `rate.gate_s`, the slow estimate takes that average ([`RateState::take_handover`]: θ24 + Δ, θ14 − Δ), and the gate ends
 //! as the slow rate agrees (host-sim/docs/rate-channel.md).
 //!
 //! # Validity
@@ -153,8 +148,8 @@ impl<T: Real> Curvature<T> {
 /// Corner of the output's low-pass, Hz: a second-order section on the fast rate after the
 /// row's solution. With the wide filter's double real pole (`rate.svf_hz`) and the
 /// lock-in's Butterworth it makes the rate's roll-off steeper: less noise at the same
-/// bandwidth (host-sim/docs/rate-channel.md). A design constant, not in [`Config`]: as a
-/// validated configuration field the section did not fit the stm32f405's flash budget.
+/// bandwidth (host-sim/docs/rate-channel.md). A design constant, not in [`Config`]: a
+/// validated configuration field would cost the stm32f405 image flash for no use.
 pub const POST_HZ: f64 = 100.0;
 /// Damping ζ of the output's low-pass ([`POST_HZ`]).
 pub const POST_ZETA: f64 = 0.55;
@@ -225,7 +220,7 @@ pub struct RateDesign<T> {
     to_dps: f64,
     /// The same in `T`: the outputs are scaled in `T` and widened once (on the chip three
     /// soft-`f64` multiplies per tick less, ≈ 280 instructions; for `T = f64` the same
-    /// operations as before).
+    /// operations as scaling in `f64`).
     to_dps_t: T,
     /// 1/Ts (per τ): the derivative of the fast rate.
     inv_ts: T,

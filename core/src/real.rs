@@ -10,9 +10,9 @@ use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAss
 
 /// The FPU's square root on a hard-float Arm core (the Cortex-M4F): VSQRT.F32 is IEEE 754
 /// correctly rounded, as `libm::sqrtf` is, so the chip and the host keep bit-identical
-/// results; `libm` has no Arm path and its software `sqrtf` cost 480 B of flash (code and
-/// table, `llvm-nm`; the image went 65 412 → 65 012 B) and 29 instructions a tick on
-/// average (`cargo fw-loop` 11 696 → 11 667). A two-instruction function, not inline `asm!`: the
+/// results; `libm` has no Arm path and its software `sqrtf` costs ≈ 480 B of flash (code
+/// and table, `llvm-nm -S` on the image) and ≈ 29 instructions a tick on average (`cargo
+/// fw-loop`). A two-instruction function, not inline `asm!`: the
 /// `sreg` operands need the `vfp2` target feature, which stable Rust does not let the crate
 /// enable (the thumbv7em-none-eabihf target has the FPU, its assembler takes the instruction).
 #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]

@@ -67,20 +67,21 @@
 //!    on which its excitation meter (the variance of the filtered pump-frequency
 //!    deviation, `monitor.excitation_min_fraction` of the dither's) says "not excited",
 //!    once it has said "excited" since start-up and the last covariance reset
-//!    (`estimator/step.rs`). Why: with the trace bound alone, `P` sat at `trace_max` in
-//!    the weakly excited directions, the filter kept a 2 s memory there and θ̂
-//!    random-walked along them: in the 1 h soak with the dither off θ14 (the rate term)
-//!    moved 41 % and the rate drifted 4.6 °/s/h (README, "Soak"); held, every θ stays
-//!    within 2 %. A covariance reset (a change alarm, a commanded jump) ends the hold:
-//!    no excited memory is left to keep, and the filter forgets as at start-up until
-//!    the dither is seen again (holding on after the reset left ω̂y² stuck 4.8e-3 off,
-//!    flagged settled, after an ωy² step with the dither off; README, "Soak").
+//!    (`estimator/step.rs`). Why: with the trace bound alone, `P` sits at `trace_max` in
+//!    the weakly excited directions, the filter keeps a 2 s memory there and θ̂
+//!    random-walks along them (θ14, the rate term, by tens of % in an hour with the
+//!    dither off); held, every θ stays within 2 % (`paragyro-sim soak --hours 1`,
+//!    host-sim/docs/reliability.md "Soak"). A covariance reset (a change alarm, a
+//!    commanded jump) ends the hold: no excited memory is left to keep, and the filter
+//!    forgets as at start-up until the dither is seen again (a hold kept through the reset
+//!    leaves ω̂y² stuck off, flagged settled, after an ωy² step with the dither off;
+//!    host-sim/docs/reliability.md "Soak").
 //! 2. **Trace bound.** [`Rls::begin_sample`] skips the forgetting step whenever
 //!    `trace(P) ≥ trace_max` (and whenever `trace(P)/λ` would not be finite), so
 //!    `trace(P) ≤ max(trace(P₀), trace_max/λ)` forever. FINDINGS.md recommends
 //!    `trace_max` = 10× the converged trace. It still guards what rule 1 does not see:
 //!    start-up before the dither, a device whose dither is configured off (never
-//!    excited: it forgets as before, bounded by this rule) and directions the dither
+//!    excited: it forgets on every sample, bounded by this rule) and directions the dither
 //!    itself excites only weakly.
 //!
 //! # Guards (never panic, never allocate)

@@ -89,7 +89,7 @@ pub(crate) fn om_ref(cfg: &Config) -> f64 {
 }
 
 /// Whole samples in `s` seconds (rounded, ≥ 0). Out of line: inlined at its nine uses
-/// it was ~1 KB of the firmware image.
+/// it would be ~1 KB of the firmware image.
 #[inline(never)]
 pub(crate) fn samples_at(s: f64, fs_hz: f64) -> u64 {
     libm::round(s * fs_hz).max(0.0) as u64

@@ -7,30 +7,27 @@
 //!
 //! | tick  | part                                                              |
 //! |-------|-------------------------------------------------------------------|
-//! | k     | trigger (same test as before), capture x₁, x₂                     |
+//! | k     | trigger (the one-tick version's test), capture x₁, x₂             |
 //! | k + 1 | θ̂1 = θ1n + sc1·x₁ (the captured x; `f64`)                        |
 //! | k + 2 | θ̂2 = θ2n + sc2·x₂ (`f64`)                                         |
 //! | k + 3 | the row constants of the new point ([`NominalConsts::new`])       |
 //! | k + 4 | swap (on the next updated tick): the row filters move by Δθ, θ_nom ← θ̂, x ← x − x_captured |
 //!
 //! (The trigger tick only copies x: its `f64` sums, ≈ 1 000 instructions of soft-float,
-//! had fallen on the loop's costliest tick, a covariance reset, `firmware/scripts/
-//! fil-profile.sh drift-retune 1157`; on tick k + 1 they cost the same and give the same
-//! numbers. θ̂1 and θ̂2 are apart since the rate walk: together, in a trial that kept
-//! the walk off these ticks, that tick was the loop's costliest, 3 038 instructions above
-//! the mean where the loop test allows 3 000; apart, the costliest tick is 14 627 against
-//! a mean of 11 696, `cargo fw-loop`.)
+//! would fall on the loop's costliest tick, a covariance reset (`firmware/scripts/
+//! fil-profile.sh drift-retune TICK` profiles one tick); on tick k + 1 they cost the same
+//! and give the same numbers. θ̂1 and θ̂2 are apart: together on one tick with the rate
+//! walk, that tick would be the loop's costliest, beyond what the loop test allows above
+//! the mean (`cargo fw-loop`).)
 //!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
 //! the swap (up to rounding), exactly as the one-tick version keeps it. The ticks
 //! between use the old point, as they would have before the trigger.
 //!
-//! (The rate channel's first hand-over, a new rate θ24 + Δ, θ14 − Δ at the end of every
-//! rate transient, went through the same parts; it was removed when the slow RLS took the
-//! rate as a random walk, `rate.walk_dps`, whose code needed its flash. The hand-over that
-//! ends a long hold after a rate step moves the estimate itself, `Rls::shift` in
-//! `update`: host-sim/docs/rate-channel.md.)
+//! (The rate channel's hand-over that ends a long hold after a rate step does not go
+//! through these parts: it moves the estimate itself, `Rls::shift` in `update`;
+//! host-sim/docs/rate-channel.md.)
 
 use super::design::Design;
 use super::state::State;

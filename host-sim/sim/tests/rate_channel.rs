@@ -16,9 +16,8 @@ fn opts(seed: u64) -> Options {
 }
 
 /// A 100 °/s step: the fast rate is within 1 % of the step from 25 ms on (issue 10's
-/// target; 0.58 % at seed 1 since the wide filter's curvature correction, 1.24 % before
-/// it, when the channel's own 0.65 °/s tone at the pump dither took most of the margin),
-/// no reset, the slow θ stay within a few σ of their steady-state scatter.
+/// target; 0.58 % at seed 1: the wide filter's curvature correction keeps the channel's
+/// own tone at the pump dither out of the margin, core/src/rate.rs), no reset, the slow θ stay within a few σ of their steady-state scatter.
 #[test]
 fn step_response() {
     let (r, tr) = rate_response::step(&opts(1)).unwrap();
@@ -103,10 +102,10 @@ fn rate_flag_drops_while_the_drive_rings_down() {
 /// `characterise` (seed 1): at the pump scale 1.15 (from 14 s) the drive loses its lock
 /// again and again, and a lock loss can make the slow θ jump (the slow rate 153.6 → 144.0
 /// °/s in 10 ms at 18.28 s) with the narrow channel's rate, so the gate does not see it.
-/// The flag now waits, after a lock loss, for a gate length of samples on which the slow
-/// identification is settled: no valid sample more than 4 °/s off (10.54 °/s at 18.344 s
-/// before; 2.85 now, where the drive's amplitude dips), and more than 6 000 of the 10 001
-/// samples still valid (7 207 before, 6 416 now).
+/// The flag waits, after a lock loss, for a gate length of samples on which the slow
+/// identification is settled: no valid sample more than 4 °/s off (2.85 °/s measured,
+/// where the drive's amplitude dips), and more than 6 000 of the 10 001 samples still
+/// valid (6 416 measured).
 #[test]
 fn rate_flag_waits_for_the_slow_identification_after_a_lock_loss() {
     let sc = paragyro_simulator::scenario::Scenario::builtin("characterise").unwrap();
@@ -145,12 +144,12 @@ fn assert_valid_within(tr: &[paragyro_simulator::trace::TraceRow], tol: f64) {
 }
 
 /// The same drift while the rate moves (a 5 Hz ±50 °/s sine from 1.9 s, settled, to the
-/// end; the slow identification re-identifies and retunes since the rate walk, README
-/// "Rate channel", and did not before): the rate is never flagged valid while wrong:
+/// end; the slow identification re-identifies and retunes through the rate walk,
+/// host-sim/docs/rate-channel.md): the rate is never flagged valid while wrong:
 /// within 10 °/s, where valid, of the truth delayed by the channel's own delay
 /// (`rate_response::design_delay_s`, 6.6 ms; 5.8 °/s measured; against the undelayed
 /// truth the lag alone is ≈ 12° at 5 Hz, 10 °/s, and the worst valid sample 15.8 °/s
-/// off); 880 °/s off before the quadrature test.
+/// off). The validity flag's quadrature test (core/src/rate.rs, "Validity") keeps it so.
 #[test]
 fn rate_flag_is_never_valid_and_wrong_when_the_device_drifts_under_motion() {
     let ev = "[[event]]\nt_s = 1.9\nkind = \"rate_sine\"\namplitude_dps = 50.0\nfreq_hz = 5.0\nduration_s = 6.1\n";

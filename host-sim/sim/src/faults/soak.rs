@@ -218,9 +218,9 @@ mod tests {
     use super::*;
 
     /// Issue 13's soak criterion on a short seeded run: with the dither switched off
-    /// after 20 s, every θ̂ stays within 2 % of its converged value for 60 s. Before
-    /// the RLS forgot only while excited (the trace bound alone), this run moved θ17
-    /// 4.3 % and θ14 3.3 % (`paragyro-sim soak --hours 0.0166667 --window-s 10`).
+    /// after 20 s, every θ̂ stays within 2 % of its converged value for 60 s: the RLS
+    /// forgets only while excited (core/src/rls.rs, "Forget only while excited"; the
+    /// figures: `paragyro-sim soak --hours 0.0166667 --window-s 10`).
     #[test]
     fn dither_off_holds_theta_within_2_percent() {
         let r = soak(false, 20.0, 60.0, 10.0, 13).unwrap();
