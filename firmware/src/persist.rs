@@ -428,7 +428,8 @@ impl SavePolicy {
     /// The stm32f405 board's policy at 500 Hz: settled for 5 s, then the first save of
     /// the run; then after each retune (once settled again) but at most every 10 min,
     /// and every hour regardless; 8 bytes programmed per tick (a 168-byte record in 21
-    /// ticks; firmware/README.md "Warm start" has the timing and the write budget).
+    /// ticks; firmware/docs/notes.md "Warm start on the stm32f405 board" has the timing
+    /// and the write budget).
     pub const BOARD: SavePolicy = SavePolicy {
         hold_ticks: 5 * 500,
         min_interval_ticks: 10 * 60 * 500,

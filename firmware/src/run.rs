@@ -23,8 +23,7 @@ use crate::table::{ReplayTable, control, truth};
 /// The application over the replay devices.
 pub type ReplayApp<'a> = App<ReplayAdc<'a>, ReplayAdc<'a>, ReplayAccel<'a>, CaptureDds<'a>>;
 
-/// Half-width of the pump guard around the configured centre, Hz (as in the earlier
-/// self-check): the retune of the scenario moves the centre by 37 Hz and the dither adds
+/// Half-width of the pump guard around the configured centre, Hz: the retune of the scenario moves the centre by 37 Hz and the dither adds
 /// ±21.6 Hz, so the guard never acts in a good run; it is the last line against a runaway
 /// command, not the scheduler (a clamp would show in the fault bits and fail the run).
 pub const GUARD_HALF_WIDTH_HZ: f64 = 400.0;

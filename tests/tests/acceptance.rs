@@ -109,10 +109,10 @@ fn drift_retune() {
 
 /// `drift-retune` while the rate moves (issue 10): the same drift and targets with a
 /// 5 Hz ±50 °/s sine on the 150 °/s from start-up to the end
-/// (`host-sim/scenarios/drift-retune-rate-sine.toml`). Before the slow RLS took the rate
-/// as a random walk (`rate.walk_dps`) it never settled under the sine: 154 covariance
-/// resets and no retune; now 16 and the retune. At most 30 resets here (the drift's own
-/// re-identification takes 13 on `drift-retune`).
+/// (`host-sim/scenarios/drift-retune-rate-sine.toml`). The slow RLS takes the rate as a
+/// random walk (`rate.walk_dps`): with the rate a constant of the slow RLS the estimate
+/// does not settle under the sine and does not retune. At most 30 resets here (16
+/// measured; the drift's own re-identification takes 13 on `drift-retune`).
 #[test]
 fn drift_retune_while_the_rate_moves() {
     let r = run_scenario_file("drift-retune-rate-sine.toml");

@@ -447,7 +447,7 @@ fn main() -> ! {
 
 /// Panics print their location over defmt and stop at a `udf` (the probe reports the
 /// fault and a backtrace), as panic-probe does, but without formatting the message:
-/// `core::fmt` and the panic messages were ≈ 1.5 KB of the image. The library
+/// `core::fmt` and the panic messages would be ≈ 1.5 KB of the image. The library
 /// is linted free of panics; what is left (HAL, indexing proven in range) should not fire.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {

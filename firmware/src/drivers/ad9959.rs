@@ -56,10 +56,9 @@ use embedded_hal::spi::{Operation, SpiDevice};
 /// 2·f_SYSCLK/2³² = 0.058 Hz, a quarter of 500 MHz's 0.233 Hz: each step of the pump's
 /// frequency kicks the drive's ≈ 100 Hz envelope mode, which the fast rate channel reads
 /// at 75–150 Hz: at 500 MHz the frequency's words add 0.066 °/s rms and a −0.09 to
-/// −0.17 °/s bias to the rate, at 125 MHz 0.027–0.031 and +0.01 to +0.03 (0.126 and
-/// 0.037–0.040 before the fast row's band taps; `cargo run --release -p paragyro-fil
-/// --example dds_words`, `rate-step` seeds 1–3). The
-/// pump at ≈ 22 kHz needs nothing of the higher clock.
+/// −0.17 °/s bias to the rate, at 125 MHz 0.027–0.031 and +0.01 to +0.03 (`cargo run
+/// --release -p paragyro-fil --example dds_words`, `rate-step` seeds 1–3). The pump at
+/// ≈ 22 kHz needs nothing of the higher clock.
 pub const DEFAULT_SYSCLK_HZ: f64 = 125e6;
 /// Highest SYSCLK of the part, Hz.
 pub const MAX_SYSCLK_HZ: f64 = 500e6;

@@ -787,7 +787,7 @@ impl LockinCalibration {
         {
             // A code is 24-bit, so the difference with any sane offset fits an i32; it
             // saturates (rather than wraps) for an absurd one. i32 → f32 is one VCVT,
-            // where i64 → f32 was a library call on the tick path.
+            // where i64 → f32 would be a library call on the tick path.
             *o = c.get().saturating_sub(*off) as f32 * s;
         }
         let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = v;
