@@ -373,14 +373,14 @@ fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
     }
 }
 
-/// A large geometric nonlinearity (−5e-6, 50× its detection limit; blind run 13's one
-/// top-1 miss was one at 50.5×) on a toleranced device: its linear column about a
-/// calibration that absorbed part of it fits its size within 0.04 % (|size|/σ ≈ 1 300) yet
+/// A large geometric nonlinearity (−5e-6, 50× its detection limit) on a toleranced
+/// device: its linear column about a calibration that absorbed part of it fits its size
+/// within 0.04 % (|size|/σ ≈ 1 300) yet
 /// extrapolates badly to the held-out span (its held-out closure negative), so it is not
 /// among the candidates that close [`SHARE_MIN`] of the explainable gap. The one that does,
 /// a thermal drift, is re-simulated first and rejected; the confirmation's second place
 /// then goes to the most significant of the rest, the nonlinearity, whose run brings the
-/// record to its noise. Before, it read `unknown` (the thermal drift alone re-simulated).
+/// record to its noise (re-simulating the thermal drift alone would read `unknown`).
 #[test]
 fn a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation() {
     let sc0 = Scenario::load("characterise").unwrap();

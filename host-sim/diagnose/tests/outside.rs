@@ -1,7 +1,7 @@
 //! The diagnosis on effects outside its library and outside its span (`blind::outside`,
 //! through the plant hook): one toleranced device per type, at 10× the type's detection
 //! limit, must read `unknown` (not `none`, not a library effect). Fixed seeds, not the
-//! scored ones (the blind run 4 used seed 4242).
+//! blind benchmark's scored ones (host-sim/diagnose/blind-benchmark.md).
 
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::Outside;

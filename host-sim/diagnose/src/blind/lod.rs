@@ -306,14 +306,13 @@ mod tests {
         );
     }
 
-    /// Blind run 10's record 93 (seed 2626, scored with the code before this rule; the rule
-    /// is scored by the next run, on a new seed): an angular vibration at 36.5 °/s, 1.8×
+    /// Record 93 of the blind draw of seed 2626: an angular vibration at 36.5 °/s, 1.8×
     /// its limit, fitted at 36.3 ± 1.0 °/s and closing all the floor closes, at 1.098 × its
-    /// noise. Its drive 1st-quadrature row read 1.77 after the vibration against the
-    /// floor's 1.65, more than half of that row's 0.12 "gap" left, and the verdict was
-    /// `unknown`; the row's own noise level is 1.78: nothing is left above it. With the
-    /// per-row rule counting only what is left above the row's own level by more than 3×
-    /// its scatter there (`NOISE_ROW_SCATTER_OWN`), it is named.
+    /// noise. Its drive 1st-quadrature row reads 1.77 after the vibration against the
+    /// floor's 1.65, more than half of that row's 0.12 "gap" left, which a rule on the whole
+    /// gap reads as `unknown`; the row's own noise level is 1.78: nothing is left above it.
+    /// The per-row rule counts only what is left above the row's own level by more than 3×
+    /// its scatter there (`NOISE_ROW_SCATTER_OWN`), so it is named.
     #[test]
     fn a_vibration_whose_rows_are_at_their_own_noise_is_named() {
         let sc = Scenario::load("characterise").unwrap();

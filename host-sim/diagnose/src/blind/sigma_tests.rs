@@ -72,7 +72,7 @@ pub(super) struct DeviceCheck {
     /// The calibration's error on the ten device parameters (calibrated − true).
     pub error: [f64; 10],
     /// σ of the calibration's fit (Bank::fit, the code's blocks) and, for comparison, of the
-    /// plain sandwich (CR1) on 16 blocks (the covariance before issue 11's change).
+    /// plain sandwich (CR1) on 16 blocks.
     pub sigma: [f64; 10],
     pub sigma_cr1_16: [f64; 10],
     /// `eᵀV⁻¹e` of the error against the calibration's covariance and against CR1 on 16.
@@ -180,8 +180,8 @@ fn mean(v: &[f64]) -> f64 {
 /// against its own covariance, `eᵀV⁻¹e`, averages near its 10 degrees of freedom. A
 /// covariance summed from B blocks estimates the 14 θ's from ν = B − 1 block sums, and
 /// `eᵀV⁻¹e` of a 10-parameter error against it averages about 10·ν/(ν − 11) (Hotelling):
-/// 37.5 with the 16 blocks of the code before issue 11's change (it read 37.4 here), 15.5
-/// with 32 (18.4 here). Each parameter's own z² stays of order 1 with either.
+/// 37.5 with 16 blocks (37.4 here), 15.5 with 32 (18.4 here): hence `BLOCKS` = 32.
+/// Each parameter's own z² stays of order 1 with either.
 #[test]
 fn calibration_covariance_holds_the_joint_spread_of_the_device_parameters() {
     let c = check_device(325, 24);

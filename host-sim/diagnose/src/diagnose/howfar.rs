@@ -399,9 +399,8 @@ mod tests {
     /// The crash path itself, end to end on a record with a rate table: the stages run to
     /// the verdict, which is then set as the parameter face names it with a second effect
     /// on top (`anisodamping` and `feedthrough`, the feedthrough's columns fitted with the
-    /// baseline's). Before issue 31's fix `how_far` indexed past the fit (howfar.rs:86);
-    /// now the re-simulation adds the feedthrough alone and says why the anisodamping is
-    /// left out.
+    /// baseline's). `how_far` stays within the fit: the re-simulation adds the
+    /// feedthrough alone and says why the anisodamping is left out.
     #[test]
     fn how_far_with_a_face_named_anisodamping_under_a_second_effect() {
         use crate::diagnose::verdict::{Answer, Decision, Secondary, Verdict};
