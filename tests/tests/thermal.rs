@@ -119,11 +119,23 @@ fn the_thermal_report_reads_the_warm_up() {
         "followed {} ppm/s",
         t.drift_th22_max_ppm_s
     );
+    // the sense amplitude against the oracle twin whose pump sits at 2·f_y: ≥ 98 % at every
+    // second of the warm-up
+    let oracle = paragyro_simulator::thermal::oracle_sense_amp(&sc, sc.seed).expect("oracle");
+    assert_eq!(oracle.len(), r.trace.len());
+    let t = t.with_oracle(&r.trace, &oracle);
+    let worst = t.sense_amp_vs_oracle_min.expect("20 whole seconds");
+    assert!(
+        worst >= 0.98,
+        "sense amplitude {:.1} % of the oracle's",
+        100.0 * worst
+    );
     let md = t.markdown();
     assert!(
         md.contains("| covariance resets after start-up | 0 |"),
         "{md}"
     );
+    assert!(md.contains("against the oracle twin's"), "{md}");
     // a scenario without a temperature profile has no thermal report
     let plain = Scenario::builtin("drift-retune").expect("built in");
     assert!(paragyro_simulator::thermal::ThermalReport::of(&plain, &r.trace).is_err());

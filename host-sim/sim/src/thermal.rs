@@ -4,8 +4,9 @@
 //! From a run of a scenario with a `[temperature]` profile: the covariance resets after
 //! start-up, the rate's validity and error before and during the temperature's change, the
 //! identified ω̂y² against the truth, the pump centre against twice the sense resonance, the
-//! drift the core followed, and the same per kelvin of die temperature (a table and
-//! `thermal.png`).
+//! drift the core followed, the sense amplitude against an oracle twin whose pump centre
+//! sits at twice the true sense resonance, and the same per kelvin of die temperature (a
+//! table and `thermal.png`).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -14,9 +15,60 @@ use anyhow::{Result, bail};
 use plotters::prelude::{BLACK, BLUE, RED};
 use serde::Serialize;
 
+use paragyro_core::{Estimator, Sample, StepOutput};
+
+use crate::lockin::LockinExt;
 use crate::plot::{Line, Panel, draw_panel, figure, grid};
+use crate::runner::{Device, LoopHooks, closed_loop_hooked, core_config};
 use crate::scenario::Scenario;
 use crate::trace::TraceRow;
+
+/// The oracle's pump: the core's command with its centre replaced by twice the true sense
+/// resonance at the next sample (the dither and the scale kept).
+struct OraclePump<'a> {
+    sc: &'a Scenario,
+    fs_hz: f64,
+}
+
+impl LoopHooks<f32> for OraclePump<'_> {
+    fn step(
+        &mut self,
+        k: u64,
+        est: &mut Estimator<f32>,
+        sample: &mut Sample<f32>,
+        _last: &StepOutput,
+    ) -> StepOutput {
+        let mut out = est.step(sample);
+        let t_next = (k + 1) as f64 / self.fs_hz;
+        let target = 2.0 * self.sc.sim.f0_hz * self.sc.plant_at(t_next).phys[4].sqrt();
+        out.pump_hz_next += target - est.pump_centre_hz();
+        out
+    }
+}
+
+/// The sense amplitude |B1| of every sample of the oracle twin: the same scenario (seed
+/// `seed`, f32 core) with the pump centre held at twice the true sense resonance.
+pub fn oracle_sense_amp(sc: &Scenario, seed: u64) -> Result<Vec<(f64, f64)>> {
+    let cfg = core_config(sc);
+    let mut est: Estimator<f32> = cfg
+        .build()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))?;
+    let mut hook = OraclePump {
+        sc,
+        fs_hz: cfg.fs_hz,
+    };
+    let mut amp = Vec::new();
+    closed_loop_hooked(
+        sc,
+        seed,
+        &Device::default(),
+        &mut est,
+        &mut hook,
+        |_| {},
+        |ls| amp.push((ls.t_s, ls.lockin.y_abs(1))),
+    )?;
+    Ok(amp)
+}
 
 /// Start-up excluded from every figure, s (the identification converges, the dither starts).
 pub const STARTUP_S: f64 = 2.5;
@@ -64,6 +116,10 @@ pub struct ThermalReport {
     /// Largest drift of θ22 the core followed, ppm/s, and the truth's ωy² rate, ppm/s.
     pub drift_th22_max_ppm_s: f64,
     pub wy2_rate_max_ppm_s: f64,
+    /// The lowest ratio, over the whole seconds of the change, of the mean sense amplitude
+    /// to the oracle twin's (its pump centre at twice the true sense resonance); `None`
+    /// without the twin.
+    pub sense_amp_vs_oracle_min: Option<f64>,
     /// Per kelvin of die temperature during the change.
     pub bins: Vec<KelvinBin>,
 }
@@ -188,8 +244,41 @@ impl ThermalReport {
                 .map(|r| r.drift_ppm_s[1].abs())
                 .fold(0.0, f64::max),
             wy2_rate_max_ppm_s: wy2_rate,
+            sense_amp_vs_oracle_min: None,
             bins,
         })
+    }
+
+    /// Adds the comparison with the oracle twin ([`oracle_sense_amp`]): the mean sense
+    /// amplitude of each whole second of the change against the twin's.
+    pub fn with_oracle(mut self, trace: &[TraceRow], oracle: &[(f64, f64)]) -> Self {
+        let mean = |v: &mut dyn Iterator<Item = f64>| {
+            let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+            if n == 0 { f64::NAN } else { s / n as f64 }
+        };
+        let mut worst: Option<f64> = None;
+        let mut t = self.change_s.0.ceil();
+        while t + 1.0 <= self.change_s.1 {
+            let a = mean(
+                &mut trace
+                    .iter()
+                    .filter(|r| (t..t + 1.0).contains(&r.t_s))
+                    .map(|r| r.sense_amp_um),
+            );
+            let b = mean(
+                &mut oracle
+                    .iter()
+                    .filter(|(ts, _)| (t..t + 1.0).contains(ts))
+                    .map(|x| x.1),
+            );
+            let r = a / b;
+            if r.is_finite() {
+                worst = Some(worst.map_or(r, |w: f64| w.min(r)));
+            }
+            t += 1.0;
+        }
+        self.sense_amp_vs_oracle_min = worst;
+        self
     }
 
     /// The report as Markdown: the figures, then the per-kelvin table.
@@ -252,6 +341,13 @@ impl ThermalReport {
         ];
         for (k, v) in rows {
             let _ = writeln!(s, "| {k} | {v} |");
+        }
+        if let Some(r) = self.sense_amp_vs_oracle_min {
+            let _ = writeln!(
+                s,
+                "| lowest 1 s mean sense amplitude during the change, against the oracle twin's (pump at 2·f_y) | {:.1} % |",
+                pct(r)
+            );
         }
         let _ = writeln!(
             s,

@@ -9,7 +9,7 @@ use super::{
 };
 use paragyro_simulator::runner::RunOptions;
 use paragyro_simulator::scenario::Scenario;
-use paragyro_simulator::thermal::ThermalReport;
+use paragyro_simulator::thermal::{ThermalReport, oracle_sense_amp};
 
 /// `host-sim/scenarios/warm-up.toml`, the default.
 const WARM_UP: &str = include_str!("../../../scenarios/warm-up.toml");
@@ -73,7 +73,10 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         seed: a.seed,
     };
     let result = run_with_progress(&sc, &opts, ctx.progress_ok && !a.quiet)?;
-    let report = ThermalReport::of(&sc, &result.trace).map_err(fail(EXIT_RUN))?;
+    let oracle = oracle_sense_amp(&sc, a.seed.unwrap_or(sc.seed)).map_err(fail(EXIT_RUN))?;
+    let report = ThermalReport::of(&sc, &result.trace)
+        .map_err(fail(EXIT_RUN))?
+        .with_oracle(&result.trace, &oracle);
     let mut files = write_run(&a.out, &result)?;
     let md = report.markdown();
     let write = |name: &str, text: &str| -> Result<PathBuf, Failure> {
