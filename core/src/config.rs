@@ -77,7 +77,8 @@ pub struct RlsConfig {
     /// followed as a drift, not detected as a jump. 3 (the default) holds the lag a drift
     /// leaves at a third of the noise (module `drift`); 0 disables it.
     pub drift_kappa: f64,
-    /// Time constant of the measured drift (the velocity's integration), s.
+    /// The measured drift's window, s: its EWMA has a fifth of it as time constant, its
+    /// wander is learned over ten windows, and after a reset it waits two.
     pub drift_window_s: f64,
     /// The fastest drift followed as a drift, ppm/s of the parameter (ω_x², ω_y² move
     /// 2·TCF·dT/dt: 66 ppm/s at −33 ppm/K and 1 K/s); faster is a jump for the change

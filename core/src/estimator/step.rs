@@ -251,7 +251,7 @@ impl<T: Real> State<T> {
                 self.rls1.estimate_at(DRIFT_COL) - b1,
                 self.rls2.estimate_at(DRIFT_COL) - b2,
             ];
-            // the velocity learns from a settled estimate, two windows after a reset
+            // the drift is measured on a settled estimate, two windows after a reset
             let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
             self.drift.push(&f.drift, corr, learn);
         }
@@ -303,10 +303,10 @@ impl<T: Real> State<T> {
         }
     }
 
-    /// Stage 4b: the drift's prediction and walk (module `drift`): one axis every other
-    /// update, each axis every fourth with four times the move and the variance (the
-    /// chip's tick budget; the drift is slow against 8 ms). Returns the drift columns'
-    /// estimates before this sample's rows, whose corrections measure the drift.
+    /// Stage 4b: the drift's walk (module `drift`): one axis every other update, each
+    /// axis every fourth with four times the variance (the chip's tick budget; the drift is
+    /// slow against 8 ms). Returns the drift columns' estimates before this sample's rows,
+    /// whose corrections measure the drift.
     #[inline(always)]
     fn walk_drift(&mut self, f: &super::design::Fit<T>, k: u64) -> [T; 2] {
         if f.drift.enabled() && k & 1 == 0 {
