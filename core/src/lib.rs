@@ -57,6 +57,7 @@
 //!         accel_mps2: [0.0, 0.0],
 //!         pump_hz,
 //!         pump_scale,
+//!         temp_c: None,
 //!     };
 //!     let out = est.step(&sample);
 //!     // command these to the pump (the DDS) for the next sample instant

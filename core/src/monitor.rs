@@ -575,6 +575,7 @@ mod tests {
             accel_mps2: [1.0, -1.0],
             pump_hz: 21_883.95,
             pump_scale: 1.0,
+            temp_c: None,
         };
         assert!(InputCheck::of(&good, &limits, &mut stuck).ok());
         let set = |s: &mut Sample<f32>, i: usize, v: f32| match i {

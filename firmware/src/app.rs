@@ -514,6 +514,7 @@ where
                 accel_mps2: [f32::NAN; 2],
                 pump_hz: f64::NAN,
                 pump_scale: f32::NAN,
+                temp_c: None,
             },
             accel_stuck: StuckAccel {
                 limit: 0,
@@ -561,6 +562,7 @@ where
             accel_mps2: [f32::NAN; 2],
             pump_hz: f64::NAN,
             pump_scale: f32::NAN,
+            temp_c: None,
         };
         Ok(())
     }
@@ -680,6 +682,7 @@ where
             accel_mps2: accel,
             pump_hz,
             pump_scale,
+            temp_c: None,
         };
         let out = self.est.step(&self.last);
         faults |= self.command(&out, io);

@@ -198,6 +198,7 @@ impl Reference {
             accel_mps2: [ax, ay],
             pump_hz,
             pump_scale,
+            temp_c: None,
         }
     }
 }

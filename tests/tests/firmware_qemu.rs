@@ -204,6 +204,7 @@ fn bare_core(table: &ReplayTable<'_>) -> Vec<(f64, Vec<f64>)> {
             accel_mps2: [s.accel[0] as f32 * lsb, s.accel[1] as f32 * lsb],
             pump_hz: s.pump_hz,
             pump_scale: s.pump_scale,
+            temp_c: None,
         };
         let o = est.step(&sample);
         let (t1, t2) = est.theta();

@@ -52,6 +52,7 @@ fn sample(k: u64, pump_hz: f64) -> Sample<f32> {
         accel_mps2: [98.0665, 98.0665],
         pump_hz,
         pump_scale: 1.0,
+        temp_c: None,
     }
 }
 
@@ -242,6 +243,7 @@ fn sample_f64(k: u64, pump_hz: f64) -> Sample<f64> {
         accel_mps2: [98.0665, 98.0665],
         pump_hz,
         pump_scale: 1.0,
+        temp_c: None,
     }
 }
 

@@ -39,6 +39,7 @@ fn cast<T: Real>(s: &Sample<f64>) -> Sample<T> {
         accel_mps2: s.accel_mps2.map(T::from_f64),
         pump_hz: s.pump_hz,
         pump_scale: T::from_f64(s.pump_scale),
+        temp_c: None,
     }
 }
 

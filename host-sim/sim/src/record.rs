@@ -231,6 +231,7 @@ impl RecordRow {
             accel_mps2: [T::from_f64(self.ax_mps2), T::from_f64(self.ay_mps2)],
             pump_hz: self.pump_hz,
             pump_scale: Sample::<T>::pump_scale_from_volts(self.pump_amp_v, header.pump_amp_ref_v),
+            temp_c: self.temp_c.map(T::from_f64),
         }
     }
 

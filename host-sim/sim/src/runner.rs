@@ -370,6 +370,7 @@ pub fn closed_loop_hooked<T: Real>(
             ],
             pump_hz,
             pump_scale: T::from_f64(s_k),
+            temp_c: None,
         };
         let nominal_before = est.nominal_theta();
         let out = hooks.step(k, est, &mut sample, &last_out);

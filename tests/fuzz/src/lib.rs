@@ -148,6 +148,7 @@ fn sample_of(ch: &[f32; 16], pump_hz: f64, pump_scale: f32) -> Sample<f32> {
             ],
         },
         accel_mps2: [ch[14], ch[15]],
+        temp_c: None,
         pump_hz,
         pump_scale,
     }
