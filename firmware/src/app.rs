@@ -11,7 +11,9 @@
 //!    within one data period, and reading before any computation keeps the read at a
 //!    fixed, short latency after DRDY;
 //! 2. the [`Sample`]: lock-in outputs in µm through each axis' [`LockinCalibration`] (the
-//!    single conversion point), the accelerometer's X and Y (drive, sense axis), and the
+//!    single conversion point), the accelerometer's X and Y (drive, sense axis), the die
+//!    temperature (the accelerometer's die: the TEMP2/TEMP1 bytes of the same burst, no
+//!    extra transaction, taken every [`TEMP_EVERY`]-th tick and held between), and the
 //!    pump frequency and scale *in effect* (what the DDS realised at the previous
 //!    IO_UPDATE, not what the core asked for);
 //! 3. [`Estimator::step`];
@@ -35,6 +37,9 @@
 //! full scale, or an accelerometer code at the end of its 20-bit range, is replaced by a
 //! value beyond the core's full scale ([`paragyro_core::config::MonitorConfig`]), so the
 //! core counts it as saturated even when the ADC clips below the core's limit. The
+//! temperature is an optional input: a failed or stuck accelerometer read on a tick that
+//! takes the temperature, or a code outside [`TEMP_PLAUSIBLE_C`], gives `temp_c: None`
+//! (held until the next such tick) without a fault bit of its own. The
 //! firmware's own [`FwCounters`] say which chip failed and how.
 //!
 //! **DDS errors.** Words reach the DDS cores only at IO_UPDATE, so a tick whose writes
@@ -88,7 +93,7 @@ use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOu
 
 use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
 use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
-use crate::drivers::adxl355::Adxl355;
+use crate::drivers::adxl355::{self, Adxl355};
 
 mod pump;
 pub use pump::{PumpAmplitude, PumpGuard, half_steps};
@@ -273,6 +278,8 @@ pub struct App<AX, AY, XL, DDS> {
     last: Sample<f32>,
     /// The stuck-accelerometer test ([`App::set_accel_stuck_limit`]).
     accel_stuck: StuckAccel,
+    /// Ticks until the next one takes the burst's temperature ([`TEMP_EVERY`]; 0: this one).
+    temp_countdown: u8,
 }
 
 /// A stuck ADXL355: the same X and Y codes `limit` reads in a row. A real device's noise
@@ -311,6 +318,31 @@ fn beyond(full_scale: f64) -> f32 {
 /// The 20-bit code range of the ADXL355 ends at these codes (clipping).
 const ACCEL_CODE_MAX: i32 = 0x7_FFFF;
 const ACCEL_CODE_MIN: i32 = -0x8_0000;
+
+/// Die temperatures outside this window, °C, are taken for a bad read (e.g. the sensor's
+/// reset code 0, ≈ 233 °C, before its first conversion or with TEMP_OFF set) and give
+/// `temp_c: None`.
+pub const TEMP_PLAUSIBLE_C: (f32, f32) = (-60.0, 150.0);
+
+/// The tick takes the die temperature from every this many sample bursts (10 Hz at
+/// 500 Hz; the first tick after [`App::configure`] is one) and holds it between: the die
+/// warms by millikelvins in 0.1 s, below one code (0.11 K), and the conversion then costs
+/// the tick a countdown, not a conversion and a store every sample.
+pub const TEMP_EVERY: u8 = 50;
+
+/// [`TEMP_PLAUSIBLE_C`] as ADXL355 temperature codes (the code falls as the die warms):
+/// 754 ≈ 149.97 °C, 2654 ≈ −59.97 °C (`adxl355::temp_c_from_raw`; the unit test checks
+/// every code). The code is tested, not the temperature: one integer range test instead
+/// of two floating-point comparisons.
+const TEMP_PLAUSIBLE_CODES: (u16, u16) = (754, 2654);
+
+/// The ADXL355's temperature code in °C, `None` outside [`TEMP_PLAUSIBLE_C`].
+pub fn plausible_temp_c(raw12: u16) -> Option<f32> {
+    let (lo, hi) = TEMP_PLAUSIBLE_CODES;
+    (lo..=hi)
+        .contains(&raw12)
+        .then(|| adxl355::temp_c_from_raw(raw12))
+}
 
 fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
     let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = x;
@@ -404,17 +436,19 @@ fn read_axis<S: SpiDevice>(
 }
 
 /// X and Y acceleration (drive, sense axis), NaN on any error, beyond the core's full
-/// scale where the code clipped.
+/// scale where the code clipped; and the temperature code of the same burst, 0 (the
+/// sensor's reset value, implausible) on any error or a stuck device. No fault bit for the
+/// temperature: it is an optional input.
 fn read_accel<S: SpiDevice>(
     accel: &mut Adxl355<S>,
     beyond_mps2: f32,
     counters: &mut FwCounters,
     stuck: &mut StuckAccel,
-) -> ([f32; 2], u8) {
+) -> ([f32; 2], u16, u8) {
     match accel.read_sample() {
         Ok(s) if stuck.push((s.raw.x, s.raw.y)) => {
             bump(&mut counters.accel_stuck);
-            ([f32::NAN; 2], fault::ACCEL)
+            ([f32::NAN; 2], 0, fault::ACCEL)
         }
         Ok(s) => {
             let [ax, ay, _] = s.accel_mps2;
@@ -431,12 +465,12 @@ fn read_accel<S: SpiDevice>(
             if faults != 0 {
                 bump(&mut counters.accel_saturated);
             }
-            (a, faults)
+            (a, s.temp_raw, faults)
         }
         // SPI error, not ready, absent device (STATUS 0xFF reads as not ready): alike
         Err(_) => {
             bump(&mut counters.accel_errors);
-            ([f32::NAN; 2], fault::ACCEL)
+            ([f32::NAN; 2], 0, fault::ACCEL)
         }
     }
 }
@@ -521,6 +555,7 @@ where
                 last: (0, 0),
                 repeats: 0,
             },
+            temp_countdown: 0,
         }
     }
 
@@ -557,6 +592,7 @@ where
         self.node = None;
         self.dirty = true;
         self.counters = FwCounters::default();
+        self.temp_countdown = 0;
         self.last = Sample {
             lockin: lockin([f32::NAN; LOCKIN_CHANNELS], [f32::NAN; LOCKIN_CHANNELS]),
             accel_mps2: [f32::NAN; 2],
@@ -622,6 +658,18 @@ where
         Ok(plan)
     }
 
+    /// The accelerometer's die temperature, °C, read now in its own transaction (TEMP2,
+    /// TEMP1): for the boot, before the core's warm start. `None` on a bus error or a code
+    /// outside [`TEMP_PLAUSIBLE_C`] (e.g. the sensor's reset code before its first
+    /// conversion). The ticks take the temperature from their sample burst instead.
+    pub fn read_temperature_c(&mut self) -> Option<f32> {
+        self.chips
+            .accel
+            .read_temperature_raw()
+            .ok()
+            .and_then(plausible_temp_c)
+    }
+
     /// The 500 Hz tick (DRDY interrupt body): read, step, command. Bounded, allocation-
     /// free, never panics; see the module documentation for the order and fault rules.
     pub fn tick<IO: IoUpdate + ?Sized>(&mut self, io: &mut IO) -> TickReport {
@@ -663,7 +711,7 @@ where
             fault::ADC_Y,
             &mut self.counters,
         );
-        let (accel, fa) = read_accel(
+        let (accel, temp_raw, fa) = read_accel(
             &mut self.chips.accel,
             self.accel_beyond_mps2,
             &mut self.counters,
@@ -676,14 +724,17 @@ where
             faults |= fault::PUMP_UNKNOWN;
         }
         // the sample is built in place (a local and a copy into `last` after the step
-        // cost an 80-byte `memcpy` a tick)
-        self.last = Sample {
-            lockin: lockin(x, y),
-            accel_mps2: accel,
-            pump_hz,
-            pump_scale,
-            temp_c: None,
-        };
+        // cost an 80-byte `memcpy` a tick); its temperature is held between reads
+        self.last.lockin = lockin(x, y);
+        self.last.accel_mps2 = accel;
+        self.last.pump_hz = pump_hz;
+        self.last.pump_scale = pump_scale;
+        if let Some(n) = self.temp_countdown.checked_sub(1) {
+            self.temp_countdown = n;
+        } else {
+            self.temp_countdown = TEMP_EVERY - 1;
+            self.last.temp_c = plausible_temp_c(temp_raw);
+        }
         let out = self.est.step(&self.last);
         faults |= self.command(&out, io);
         TickReport {
@@ -1008,6 +1059,20 @@ mod tests {
             .map(|xy| s.push(xy))
             .collect();
         assert_eq!(seen, [false, false, true, true, false, false, true]);
+    }
+
+    /// The code window is the temperature window, code by code.
+    #[test]
+    fn the_temperature_code_window_is_the_celsius_window() {
+        let (lo, hi) = TEMP_PLAUSIBLE_C;
+        let mut inside = 0;
+        for code in 0..=0x0FFF {
+            let t = adxl355::temp_c_from_raw(code);
+            let want = (lo..=hi).contains(&t).then_some(t);
+            assert_eq!(plausible_temp_c(code), want, "code {code}: {t} °C");
+            inside += usize::from(want.is_some());
+        }
+        assert_eq!(inside, 2654 - 754 + 1);
     }
 
     /// `f64_as_u32` is the saturating `as u32` cast.

@@ -6,7 +6,8 @@ use embedded_hal_mock::eh1::delay::NoopDelay;
 use paragyro_core::estimator::event;
 use paragyro_core::{Config, Counters, Cplx, Estimator, Lockin, Sample, StepOutput};
 use paragyro_firmware::app::{
-    App, Chips, FwCounters, IoUpdate, PumpAmplitude, PumpGuard, TickReport, fault,
+    App, Chips, FwCounters, IoUpdate, PumpAmplitude, PumpGuard, TEMP_EVERY, TEMP_PLAUSIBLE_C,
+    TickReport, fault, plausible_temp_c,
 };
 use paragyro_firmware::drivers::ad9959::{
     self, Ad9959, AmplitudeWord, Channel, DEFAULT_SYSCLK_HZ, PumpPlan,
@@ -17,7 +18,7 @@ use paragyro_firmware::drivers::ads131m08::{
 use paragyro_firmware::drivers::adxl355::{self, Adxl355, HighPass, Odr, Range, RawAccel};
 use paragyro_firmware::replay::{
     AdcFaults, CaptureDds, DdsCapture, NoIoUpdate, ReplayAccel, ReplayAdc, ReplayError, Span,
-    accel_bytes, encode_accel, encode_lockin, encode_um,
+    accel_bytes, encode_accel, encode_lockin, encode_temp, encode_um, temp_bytes,
 };
 
 const SYSCLK: f64 = DEFAULT_SYSCLK_HZ;
@@ -26,6 +27,8 @@ const PUMP_STEP_HZ: f64 = 2.0 * SYSCLK / ad9959::FTW_SCALE;
 /// Faults are injected at this sample (tick) index: past the start-up gate (0.5 s) and
 /// the dither onset (1 s), so the RLS updates and the pump moves every tick.
 const F: usize = 600;
+/// The ADXL355 temperature code the clean rig serves: ≈ 31.4 °C.
+const TEMP_CODE: u16 = 1827;
 
 type TestApp<'a> = App<ReplayAdc<'a>, ReplayAdc<'a>, ReplayAccel<'a>, CaptureDds<'a>>;
 
@@ -133,7 +136,7 @@ fn clean<'a>(d: &'a Data, cap: &'a DdsCapture) -> TestApp<'a> {
     build(
         ReplayAdc::new(&d.x, cal_x()),
         ReplayAdc::new(&d.y, cal_y()),
-        ReplayAccel::new(&d.acc),
+        ReplayAccel::new(&d.acc).with_temp_raw(TEMP_CODE),
         cap,
     )
 }
@@ -198,7 +201,7 @@ impl Reference {
             accel_mps2: [ax, ay],
             pump_hz,
             pump_scale,
-            temp_c: None,
+            temp_c: Some(adxl355::temp_c_from_raw(TEMP_CODE)),
         }
     }
 }
@@ -523,6 +526,164 @@ fn clipped_accelerometer_is_saturated_for_the_core() {
         assert_eq!(c1.saturated, c0.saturated + 1);
         assert_eq!(r.faults, fault::SATURATED);
     });
+}
+
+/// Every tick's sample carries the ADXL355's die temperature from the TEMP2/TEMP1 bytes
+/// of its burst, in °C by the driver's transfer function; the boot read gives the same.
+#[test]
+fn the_sample_carries_the_accelerometer_temperature() {
+    let d = data(20);
+    for (code, want) in [
+        (1885, 25.0f32),
+        (1704, 45.0),
+        (2337, -24.945),
+        (754, 149.97),
+    ] {
+        let cap = DdsCapture::new(SYSCLK);
+        let mut io = cap.io_update();
+        let mut app = build(
+            ReplayAdc::new(&d.x, cal_x()),
+            ReplayAdc::new(&d.y, cal_y()),
+            ReplayAccel::new(&d.acc).with_temp_raw(code),
+            &cap,
+        );
+        assert_eq!(app.last_sample().temp_c, None, "no sample yet");
+        let boot = app.read_temperature_c().unwrap();
+        assert!((boot - want).abs() < 0.01, "code {code}: {boot} °C at boot");
+        app.start(&mut io).unwrap();
+        for _ in 0..10 {
+            let r = app.tick(&mut io);
+            assert!(r.sample_ok && r.faults == 0, "{r:?}");
+            let t = app.last_sample().temp_c.unwrap();
+            assert_eq!(t.to_bits(), boot.to_bits(), "code {code}");
+        }
+        assert_eq!(
+            app.counters(),
+            FwCounters {
+                ticks: 10,
+                ..FwCounters::default()
+            }
+        );
+    }
+}
+
+/// A temperature code outside −60…+150 °C (the reset value 0, all-ones, one code past
+/// either end) gives `temp_c: None`, and only that: the acceleration and the sample are
+/// good, no fault bit, no counter. The boot read says the same.
+#[test]
+fn an_implausible_temperature_code_is_none_and_the_sample_stays_good() {
+    let (lo, hi) = TEMP_PLAUSIBLE_C;
+    // the window's ends in codes: 754 (≈ 149.97 °C) and 2654 (≈ −59.97 °C) are inside
+    assert!(plausible_temp_c(754).is_some() && plausible_temp_c(2654).is_some());
+    assert_eq!(plausible_temp_c(753), None);
+    assert_eq!(plausible_temp_c(2655), None);
+    assert!(adxl355::temp_c_from_raw(753) > hi && adxl355::temp_c_from_raw(2655) < lo);
+    let d = data(20);
+    for code in [0, 0x0FFF, 753, 2655] {
+        let cap = DdsCapture::new(SYSCLK);
+        let mut io = cap.io_update();
+        let mut app = build(
+            ReplayAdc::new(&d.x, cal_x()),
+            ReplayAdc::new(&d.y, cal_y()),
+            ReplayAccel::new(&d.acc).with_temp_raw(code),
+            &cap,
+        );
+        assert_eq!(app.read_temperature_c(), None, "boot read of code {code}");
+        app.start(&mut io).unwrap();
+        for _ in 0..10 {
+            let r = app.tick(&mut io);
+            assert!(r.sample_ok && r.faults == 0, "code {code}: {r:?}");
+            assert!(r.out.health.inputs_valid);
+            let s = app.last_sample();
+            assert_eq!(s.temp_c, None, "code {code}");
+            assert!(s.accel_mps2.iter().all(|a| a.is_finite()));
+        }
+        assert_eq!(
+            app.counters(),
+            FwCounters {
+                ticks: 10,
+                ..FwCounters::default()
+            }
+        );
+    }
+    // a replayed record carries no temperature: the replay's default code is 0
+    let cap = DdsCapture::new(SYSCLK);
+    let mut io = cap.io_update();
+    let mut app = build(
+        ReplayAdc::new(&d.x, cal_x()),
+        ReplayAdc::new(&d.y, cal_y()),
+        ReplayAccel::new(&d.acc),
+        &cap,
+    );
+    app.start(&mut io).unwrap();
+    assert!(app.tick(&mut io).sample_ok);
+    assert_eq!(app.last_sample().temp_c, None);
+}
+
+/// The temperature is taken from every `TEMP_EVERY`-th burst, the first tick's included,
+/// and held between: a failed accelerometer read (bus error, absent device, stuck codes)
+/// on a reading tick gives `None` until the next reading tick; on any other tick the held
+/// temperature stays.
+#[test]
+fn the_temperature_is_read_every_temp_every_ticks_and_held_between() {
+    let every = usize::from(TEMP_EVERY);
+    assert_eq!(every, 50, "10 Hz at 500 Hz");
+    let n = 2 * every + 5;
+    let d = data(n);
+    let want = Some(adxl355::temp_c_from_raw(TEMP_CODE));
+    let cap = DdsCapture::new(SYSCLK);
+    let mut io = cap.io_update();
+    let mut app = build(
+        ReplayAdc::new(&d.x, cal_x()),
+        ReplayAdc::new(&d.y, cal_y()),
+        ReplayAccel::new(&d.acc)
+            .with_temp_raw(TEMP_CODE)
+            .with_spi_error(Span::at(3))
+            .with_missing(Span::at(every)),
+        &cap,
+    );
+    app.start(&mut io).unwrap();
+    for k in 0..n {
+        let r = app.tick(&mut io);
+        let bad = k == 3 || k == every;
+        assert_eq!(r.faults, if bad { fault::ACCEL } else { 0 }, "tick {k}");
+        let lost = (every..2 * every).contains(&k);
+        let t = app.last_sample().temp_c;
+        assert_eq!(t, if lost { None } else { want }, "tick {k}");
+    }
+    assert_eq!(app.counters().accel_errors, 2);
+    // `configure` starts over: the next tick reads
+    let cfg = Config::table2();
+    app.configure(&cfg, cal_x(), cal_y(), guard(&cfg)).unwrap();
+    assert_eq!(app.last_sample().temp_c, None);
+
+    // stuck X and Y codes: refused, and the next reading tick has no temperature
+    let mut d = data(2 * every);
+    d.acc.fill([0.1, -0.2]);
+    let cap = DdsCapture::new(SYSCLK);
+    let mut io = cap.io_update();
+    let mut app = clean(&d, &cap);
+    app.set_accel_stuck_limit(3);
+    app.start(&mut io).unwrap();
+    for k in 0..2 * every {
+        let r = app.tick(&mut io);
+        assert_eq!(r.faults, if k >= 2 { fault::ACCEL } else { 0 }, "tick {k}");
+        let t = app.last_sample().temp_c;
+        assert_eq!(t, if k >= every { None } else { want }, "tick {k}");
+    }
+
+    // the boot read fails on an absent device (all-ones: code 0xFFF)
+    let d = data(4);
+    let cap = DdsCapture::new(SYSCLK);
+    let mut app = build(
+        ReplayAdc::new(&d.x, cal_x()),
+        ReplayAdc::new(&d.y, cal_y()),
+        ReplayAccel::new(&d.acc)
+            .with_temp_raw(TEMP_CODE)
+            .with_missing(Span::new(0, 1)),
+        &cap,
+    );
+    assert_eq!(app.read_temperature_c(), None);
 }
 
 #[test]
@@ -957,6 +1118,37 @@ fn replay_accel_runs_the_driver_init_and_follows_the_range() {
     assert_eq!(xl.read_sample(), Err(adxl355::Error::Spi(ReplayError)));
     assert!(xl.check_id().is_ok());
     assert!(xl.read_sample().is_ok()); // sample 3 = table 0 (looping)
+}
+
+/// The replayed ADXL355's temperature: `encode_temp` is the nearest code under the
+/// driver's transfer function (clamped, NaN → 0), served in the sample burst and by
+/// TEMP2/TEMP1 alone; a software reset clears it until the next sample.
+#[test]
+fn replay_accel_serves_the_temperature_code() {
+    assert_eq!(encode_temp(25.0), adxl355::TEMP_INTERCEPT_CODE);
+    assert_eq!(encode_temp(f64::NAN), 0);
+    assert_eq!(encode_temp(-1e9), 0x0FFF);
+    assert_eq!(encode_temp(1e9), 0);
+    for i in 0..=200 {
+        let t = -50.0 + 0.987 * f64::from(i);
+        let back = f64::from(adxl355::temp_c_from_raw(encode_temp(t)));
+        assert!((back - t).abs() <= 0.5 / 9.05 + 1e-4, "{t} → {back}");
+    }
+    assert_eq!(temp_bytes(0x0ABC), [0x0A, 0xBC]);
+    assert_eq!(temp_bytes(0xFABC), [0x0A, 0xBC], "12 bits");
+
+    let acc = [[0.0f32, 0.0]; 3];
+    let code = encode_temp(41.5);
+    let mut xl = Adxl355::new(ReplayAccel::new(&acc).with_temp_raw(code));
+    xl.init(Range::G8, Odr::Hz500, HighPass::Off).unwrap();
+    assert_eq!(xl.read_temperature_raw(), Ok(code));
+    let s = xl.read_sample().unwrap();
+    assert_eq!(s.temp_raw, code);
+    assert!((s.temp_c() - 41.5).abs() < 0.06);
+    xl.reset().unwrap();
+    assert_eq!(xl.read_temperature_raw(), Ok(0), "reset value");
+    xl.read_sample().unwrap();
+    assert_eq!(xl.read_temperature_raw(), Ok(code));
 }
 
 #[test]

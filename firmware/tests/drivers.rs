@@ -535,6 +535,7 @@ fn xl_command_bytes() {
     assert_eq!(R::DevIdAd.read_cmd(), 0x01);
     assert_eq!(R::Status.read_cmd(), 0x09);
     assert_eq!(R::XData3.read_cmd(), 0x11);
+    assert_eq!(R::Temp2.read_cmd(), 0x0D);
     assert_eq!(R::Range.write_cmd(), 0x58);
     assert_eq!(R::PowerCtl.write_cmd(), 0x5A);
     assert_eq!(R::Reset.write_cmd(), 0x5E);
@@ -663,6 +664,9 @@ fn xl_read_sample_one_burst_with_data_ready() {
     let mut xl = Adxl355::new(Mock::new(&exp));
     let s = xl.read_sample().unwrap();
     assert_eq!((s.raw.x, s.raw.y, s.raw.z), (256_410, -1, 0));
+    // TEMP2, TEMP1 of the same burst: 0x75C = 1884, one code above 25 °C
+    assert_eq!(s.temp_raw, 1884);
+    assert_close(s.temp_c().into(), 25.0 + 1.0 / 9.05, 1e-5);
     assert_close(s.accel_mps2[0].into(), 256_410.0 * 3.9e-6 * 9.806_65, 1e-4);
     assert_close(s.accel_mps2[0].into(), 9.806_65, 1e-4);
     assert_close(s.accel_mps2[1].into(), -3.9e-6 * 9.806_65, 1e-9);
@@ -699,6 +703,70 @@ fn xl_20bit_conversion_of_known_codes() {
     assert_close(Range::G4.mps2_per_lsb().into(), 7.8e-6 * g, 1e-10);
 }
 
+/// The datasheet's nominal transfer function: 1885 LSB at 25 °C, −9.05 LSB/°C (the code
+/// falls as the die warms), from 12 bits (TEMP2's reserved upper nibble ignored).
+#[test]
+fn xl_temperature_conversion() {
+    assert_eq!(adxl355::TEMP_INTERCEPT_CODE, 1885);
+    assert_eq!(
+        adxl355::temp_c_from_raw(1885),
+        25.0,
+        "the datasheet's 25 °C point"
+    );
+    // the sign of the slope: fewer codes, warmer; 9.05 codes per kelvin
+    assert_close(adxl355::temp_c_from_raw(1885 - 181).into(), 45.0, 1e-4);
+    assert_close(adxl355::temp_c_from_raw(1885 + 362).into(), -15.0, 1e-4);
+    assert_close(
+        (adxl355::temp_c_from_raw(1000) - adxl355::temp_c_from_raw(1001)).into(),
+        1.0 / 9.05,
+        1e-5,
+    );
+    let mut last = f32::INFINITY;
+    for code in 0..=0x0FFF {
+        let t = adxl355::temp_c_from_raw(code);
+        assert!(t < last, "falling at {code}");
+        last = t;
+    }
+    // 12-bit masking: TEMP2 bits 3:0 are bits 11:8, bits 7:4 reserved
+    assert_eq!(adxl355::temp_raw12(0x07, 0x5D), 1885);
+    assert_eq!(adxl355::temp_raw12(0xF7, 0x5D), 1885);
+    assert_eq!(adxl355::temp_raw12(0x0F, 0xFF), 0x0FFF);
+    assert_eq!(adxl355::temp_raw12(0xFF, 0xFF), 0x0FFF);
+    assert_eq!(adxl355::temp_raw12(0x80, 0x01), 1);
+    assert_eq!(adxl355::temp_raw12(0x01, 0x00), 256);
+    // the reset value 0 is far out of any plausible range
+    assert!(adxl355::temp_c_from_raw(0) > 230.0);
+}
+
+#[test]
+fn xl_read_temperature_one_burst() {
+    // TEMP2 (0x06): read command 0x0D, two bytes (TEMP2, TEMP1) auto-incremented
+    let mut exp = xl_read(0x0D, vec![0x07, 0x5D]);
+    exp.extend(xl_read(0x0D, vec![0xF6, 0xA8])); // reserved bits set: masked
+    exp.extend(xl_read(0x0D, vec![0x07, 0x5D]));
+    let mut xl = Adxl355::new(Mock::new(&exp));
+    assert_eq!(xl.read_temperature_raw(), Ok(1885));
+    assert_eq!(xl.read_temperature_raw(), Ok(0x6A8));
+    assert_eq!(xl.read_temperature_c(), Ok(25.0));
+    xl.destroy().done();
+}
+
+/// `init` leaves POWER_CTL.TEMP_OFF (and STANDBY) clear: the temperature sensor runs.
+#[test]
+fn xl_init_keeps_the_temperature_sensor_on() {
+    assert_eq!(adxl355::POWER_CTL_TEMP_OFF, 0x02);
+    assert_eq!(adxl355::POWER_CTL_MEASURE & adxl355::POWER_CTL_TEMP_OFF, 0);
+    let mut exp = xl_read(0x01, vec![0xAD, 0x1D, 0xED]);
+    exp.extend(xl_write(0x5A, 0x01));
+    exp.extend(xl_write(0x58, 0x83));
+    exp.extend(xl_write(0x50, 0x03));
+    // the last POWER_CTL write: measurement mode, TEMP_OFF (bit 1) clear
+    exp.extend(xl_write(0x5A, adxl355::POWER_CTL_MEASURE));
+    let mut xl = Adxl355::new(Mock::new(&exp));
+    xl.init(Range::G8, Odr::Hz500, HighPass::Off).unwrap();
+    xl.destroy().done();
+}
+
 #[test]
 fn xl_every_operation_reports_spi_errors() {
     use adxl355::Error::Spi;
@@ -733,6 +801,8 @@ fn xl_every_operation_reports_spi_errors() {
     );
     assert_eq!(xl.read_raw(), Err(Spi(FailingSpiError)));
     assert_eq!(xl.read_sample(), Err(Spi(FailingSpiError)));
+    assert_eq!(xl.read_temperature_raw(), Err(Spi(FailingSpiError)));
+    assert_eq!(xl.read_temperature_c(), Err(Spi(FailingSpiError)));
 }
 
 // ------------------------------------------------------------------------------------------

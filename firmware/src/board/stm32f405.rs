@@ -388,6 +388,10 @@ fn main() -> ! {
     {
         fail("configuration rejected")
     }
+    // the accelerometer's die temperature at boot, for the warm start (None: no plausible
+    // code yet, e.g. before the sensor's first conversion)
+    let boot_temp_c = app.read_temperature_c();
+    defmt::info!("die temperature at boot: {} degC", boot_temp_c);
     let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut());
     let app = &mut app;
     // a real ADXL355 is noisy: 8 identical X and Y codes in a row mean a stuck device

@@ -13,6 +13,19 @@
 //! [`Error::BadId`] (see [`Error::is_missing_device`]); [`Adxl355::read_sample`] treats a
 //! STATUS byte with reserved bits set (e.g. `0xFF`) as not ready. Nothing panics.
 //!
+//! **Temperature.** TEMP2 `[3:0]` and TEMP1 hold a 12-bit unsigned code of the
+//! temperature sensor, converted with the datasheet's nominal transfer function
+//! `T = 25 °C + (code − 1885) / (−9.05 LSB/°C)` ([`temp_c_from_raw`]): the code falls as
+//! the temperature rises. Both constants are nominal; the 1885 LSB intercept in
+//! particular varies from part to part, so the absolute temperature is uncertain by
+//! that spread (changes of temperature are better known): calibrate a part where the
+//! absolute value matters. The sensor measures the accelerometer's die, next to the gyro but not the
+//! gyro's own die. It runs in measurement mode unless POWER_CTL.TEMP_OFF is set
+//! ([`Adxl355::measure`] clears it); in standby, and before its first conversion after
+//! a reset, TEMP2/TEMP1 read their reset value 0 (an implausible ≈ 233 °C). The sample
+//! burst ([`Adxl355::read_sample`]) carries the code at no extra bus cost
+//! ([`AccelSample::temp_raw`]); [`Adxl355::read_temperature_raw`] reads it alone.
+//!
 //! **Data.** Axis data are 20-bit two's complement, left-justified in three registers
 //! (`DATA3 = [19:12]`, `DATA2 = [11:4]`, `DATA1[7:4] = [3:0]`). The scale factor is
 //! 3.9 µg/LSB at ±2 g, 7.8 µg/LSB at ±4 g and 15.6 µg/LSB at ±8 g (datasheet typical;
@@ -39,6 +52,11 @@
 //! assert_eq!(adxl355::raw20_from_bytes([0x80, 0x00, 0x00]), -524_288);
 //! let one_g = adxl355::RawAccel { x: 0, y: 0, z: 256_410 }.to_mps2(Range::G2)[2];
 //! assert!((one_g - 9.806_65).abs() < 1e-3);
+//!
+//! // TEMP2, TEMP1 to °C: the datasheet's 25 °C point, 9.05 codes per −1 °C.
+//! assert_eq!(adxl355::temp_raw12(0x07, 0x5D), 1885);
+//! assert_eq!(adxl355::temp_c_from_raw(1885), 25.0);
+//! assert!((adxl355::temp_c_from_raw(1885 - 181) - 45.0).abs() < 1e-4);
 //! ```
 
 use embedded_hal::spi::{Operation, SpiDevice};
@@ -55,6 +73,27 @@ pub const RESET_CODE: u8 = 0x52;
 pub const STANDARD_GRAVITY_MPS2: f32 = 9.806_65;
 /// Upper RANGE bits the driver writes: `I2C_HS = 1` (reset value), `INT_POL = 0`.
 pub const RANGE_UPPER_BITS: u8 = 0x80;
+/// POWER_CTL.STANDBY: standby (no measurement, temperature sensor off too).
+pub const POWER_CTL_STANDBY: u8 = 0x01;
+/// POWER_CTL.TEMP_OFF: temperature processing off (TEMP2/TEMP1 not updated).
+pub const POWER_CTL_TEMP_OFF: u8 = 0x02;
+/// POWER_CTL.DRDY_OFF: the DRDY pin forced low.
+pub const POWER_CTL_DRDY_OFF: u8 = 0x04;
+/// POWER_CTL written by [`Adxl355::measure`]: measurement mode with the temperature
+/// sensor and DRDY on.
+pub const POWER_CTL_MEASURE: u8 = 0x00;
+const _: () = assert!(
+    POWER_CTL_MEASURE & (POWER_CTL_STANDBY | POWER_CTL_TEMP_OFF) == 0,
+    "measurement mode keeps the temperature sensor on"
+);
+/// Temperature code at [`TEMP_INTERCEPT_C`] (datasheet nominal; the intercept varies
+/// part to part).
+pub const TEMP_INTERCEPT_CODE: u16 = 1885;
+/// Temperature of the intercept, °C.
+pub const TEMP_INTERCEPT_C: f32 = 25.0;
+/// Slope of the temperature code, LSB/°C (datasheet nominal; negative: the code falls
+/// as the die warms).
+pub const TEMP_SLOPE_LSB_PER_C: f32 = -9.05;
 
 /// ADXL355 registers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -294,6 +333,20 @@ pub const fn raw20_from_bytes(bytes: [u8; 3]) -> i32 {
     (((b3 as u32) << 24 | (b2 as u32) << 16 | ((b1 & 0xF0) as u32) << 8) as i32) >> 12
 }
 
+/// The 12-bit temperature code from TEMP2 (its bits 3:0 are the code's bits 11:8; bits
+/// 7:4 reserved, ignored) and TEMP1 (bits 7:0).
+pub const fn temp_raw12(temp2: u8, temp1: u8) -> u16 {
+    ((temp2 & 0x0F) as u16) << 8 | temp1 as u16
+}
+
+/// Die temperature of the accelerometer, °C, from a 12-bit code with the nominal
+/// transfer function `25 + (code − 1885) / (−9.05)` (module docs: the intercept varies
+/// part to part). Codes outside a plausible range give implausible temperatures (the
+/// reset value 0 reads ≈ 233 °C): the caller judges.
+pub fn temp_c_from_raw(raw12: u16) -> f32 {
+    TEMP_INTERCEPT_C + (f32::from(raw12) - f32::from(TEMP_INTERCEPT_CODE)) / TEMP_SLOPE_LSB_PER_C
+}
+
 /// Raw 20-bit codes of the three axes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -334,6 +387,15 @@ pub struct AccelSample {
     pub raw: RawAccel,
     /// X, Y, Z acceleration, m/s².
     pub accel_mps2: [f32; 3],
+    /// Temperature code (TEMP2/TEMP1, [`temp_raw12`]) read in the same burst.
+    pub temp_raw: u16,
+}
+
+impl AccelSample {
+    /// The die temperature of the burst, °C ([`temp_c_from_raw`]; not range-checked).
+    pub fn temp_c(&self) -> f32 {
+        temp_c_from_raw(self.temp_raw)
+    }
 }
 
 /// ADXL355 driver over an [`SpiDevice`] (SPI mode 0).
@@ -426,14 +488,15 @@ impl<SPI: SpiDevice> Adxl355<SPI> {
         self.write_register(Register::Filter, filter_bits(odr, hpf))
     }
 
-    /// Enter measurement mode (temperature and DRDY on): `POWER_CTL = 0x00`.
+    /// Enter measurement mode (temperature and DRDY on, TEMP_OFF clear):
+    /// `POWER_CTL = 0x00` ([`POWER_CTL_MEASURE`]).
     pub fn measure(&mut self) -> Result<(), Error<SPI::Error>> {
-        self.write_register(Register::PowerCtl, 0x00)
+        self.write_register(Register::PowerCtl, POWER_CTL_MEASURE)
     }
 
     /// Enter standby: `POWER_CTL = 0x01`.
     pub fn standby(&mut self) -> Result<(), Error<SPI::Error>> {
-        self.write_register(Register::PowerCtl, 0x01)
+        self.write_register(Register::PowerCtl, POWER_CTL_STANDBY)
     }
 
     /// Read STATUS.
@@ -441,7 +504,8 @@ impl<SPI: SpiDevice> Adxl355<SPI> {
         self.read_register(Register::Status).map(Status)
     }
 
-    /// Check the IDs, go to standby, set range and filter, start measuring.
+    /// Check the IDs, go to standby, set range and filter, start measuring (with the
+    /// temperature sensor on: POWER_CTL.TEMP_OFF clear).
     pub fn init(
         &mut self,
         range: Range,
@@ -463,12 +527,27 @@ impl<SPI: SpiDevice> Adxl355<SPI> {
         Ok(RawAccel::from_bytes(buf))
     }
 
-    /// Read STATUS..ZDATA1 (13 bytes) in one burst; [`Error::NotReady`] unless
-    /// STATUS.DATA_RDY is set (and STATUS is plausible). Converts to m/s².
+    /// Read the temperature code: TEMP2 and TEMP1 in one burst ([`temp_raw12`]).
+    pub fn read_temperature_raw(&mut self) -> Result<u16, Error<SPI::Error>> {
+        let mut buf = [0u8; 2];
+        self.read_burst(Register::Temp2, &mut buf)?;
+        let [t2, t1] = buf;
+        Ok(temp_raw12(t2, t1))
+    }
+
+    /// Read the die temperature, °C ([`Adxl355::read_temperature_raw`],
+    /// [`temp_c_from_raw`]; not range-checked).
+    pub fn read_temperature_c(&mut self) -> Result<f32, Error<SPI::Error>> {
+        self.read_temperature_raw().map(temp_c_from_raw)
+    }
+
+    /// Read STATUS..ZDATA1 (13 bytes, the temperature code included) in one burst;
+    /// [`Error::NotReady`] unless STATUS.DATA_RDY is set (and STATUS is plausible).
+    /// Converts to m/s².
     pub fn read_sample(&mut self) -> Result<AccelSample, Error<SPI::Error>> {
         let mut buf = [0u8; 13];
         self.read_burst(Register::Status, &mut buf)?;
-        let [st, _fifo, _t2, _t1, x3, x2, x1, y3, y2, y1, z3, z2, z1] = buf;
+        let [st, _fifo, t2, t1, x3, x2, x1, y3, y2, y1, z3, z2, z1] = buf;
         let status = Status(st);
         if !status.data_ready() || status.implausible() {
             return Err(Error::NotReady);
@@ -478,6 +557,7 @@ impl<SPI: SpiDevice> Adxl355<SPI> {
             status,
             raw,
             accel_mps2: raw.to_mps2(self.range),
+            temp_raw: temp_raw12(t2, t1),
         })
     }
 }

@@ -27,6 +27,25 @@ pub fn accel_bytes(code: i32) -> [u8; 3] {
     [b3, b2, b1 & 0xF0]
 }
 
+/// The 12-bit temperature code nearest to `temp_c` under the driver's nominal transfer
+/// function (`adxl355::temp_c_from_raw`: `1885 − 9.05·(T − 25 °C)`, rounded, clamped to
+/// 0..=4095). NaN gives 0, the registers' reset value (no temperature).
+pub fn encode_temp(temp_c: f64) -> u16 {
+    if temp_c.is_nan() {
+        return 0;
+    }
+    let code = f64::from(adxl355::TEMP_INTERCEPT_CODE)
+        + (temp_c - f64::from(adxl355::TEMP_INTERCEPT_C))
+            * f64::from(adxl355::TEMP_SLOPE_LSB_PER_C);
+    u16::try_from(round_i64(code).clamp(0, 0x0FFF)).unwrap_or(0)
+}
+
+/// TEMP2, TEMP1 of a 12-bit temperature code (the inverse of `adxl355::temp_raw12`).
+pub fn temp_bytes(code: u16) -> [u8; 2] {
+    let [hi, lo] = code.to_be_bytes();
+    [hi & 0x0F, lo]
+}
+
 fn xl_reset_registers() -> [u8; XL_REGS] {
     let mut r = [0u8; XL_REGS];
     for (addr, v) in [
@@ -65,6 +84,7 @@ pub struct ReplayAccel<'a> {
     next: usize,
     transactions: usize,
     regs: [u8; XL_REGS],
+    temp_raw: u16,
 }
 
 /// Per-transaction byte-stream state of the ADXL355's serial port.
@@ -98,7 +118,22 @@ impl<'a> ReplayAccel<'a> {
             next: 0,
             transactions: 0,
             regs: xl_reset_registers(),
+            temp_raw: 0,
         }
+    }
+
+    /// TEMP2/TEMP1 serve this 12-bit temperature code (`adxl355::temp_raw12`'s inverse;
+    /// bits above 11 are dropped). The default is 0, the registers' reset value, which the
+    /// firmware reads as no temperature (≈ 233 °C, implausible): a replayed record
+    /// carries none.
+    pub fn with_temp_raw(mut self, code: u16) -> Self {
+        self.temp_raw = code & 0x0FFF;
+        put(
+            &mut self.regs,
+            usize::from(XlReg::Temp2.addr()),
+            &temp_bytes(self.temp_raw),
+        );
+        self
     }
 
     /// Z acceleration (e.g. 0 for a board on its side).
@@ -188,8 +223,9 @@ impl<'a> ReplayAccel<'a> {
             let [x3, x2, x1] = accel_bytes(x);
             let [y3, y2, y1] = accel_bytes(y);
             let [z3, z2, z1] = accel_bytes(encode_accel(self.z_mps2, range));
-            // STATUS (DATA_RDY), FIFO_ENTRIES, TEMP2, TEMP1 (≈ 25 °C), X, Y, Z
-            block = [0x01, 0, 0x07, 0x08, x3, x2, x1, y3, y2, y1, z3, z2, z1];
+            let [t2, t1] = temp_bytes(self.temp_raw);
+            // STATUS (DATA_RDY), FIFO_ENTRIES, TEMP2, TEMP1, X, Y, Z
+            block = [0x01, 0, t2, t1, x3, x2, x1, y3, y2, y1, z3, z2, z1];
         }
         put(&mut self.regs, usize::from(XlReg::Status.addr()), &block);
     }

@@ -1,13 +1,17 @@
 //! The chips as the host plays them: the two ADS131M08 lock-in ADCs and the ADXL355
-//! (their MISO bytes every tick, from the plant), and the AD9959 (the bytes the firmware
+//! (their MISO bytes every tick, from the plant; the ADXL355's TEMP2/TEMP1 from the
+//! scenario's die temperature), and the AD9959 (the bytes the firmware
 //! wrote, applied at IO_UPDATE), with the faults a scenario injects.
 
 use embedded_hal::spi::{Operation, SpiDevice};
 use paragyro_firmware::drivers::ad9959::DEFAULT_SYSCLK_HZ;
 use paragyro_firmware::drivers::ads131m08::{CHANNELS, FRAME_BYTES, Frame, RawCode};
+use paragyro_firmware::drivers::adxl355::TEMP_INTERCEPT_CODE;
 use paragyro_firmware::drivers::adxl355::{Range, STANDARD_GRAVITY_MPS2};
 use paragyro_firmware::fil::{ACCEL_BURST, DdsEntry, FromFw};
-use paragyro_firmware::replay::{DdsCapture, Span, accel_bytes, encode_accel, encode_lockin};
+use paragyro_firmware::replay::{
+    DdsCapture, Span, accel_bytes, encode_accel, encode_lockin, encode_temp, temp_bytes,
+};
 use paragyro_firmware::run::calibration;
 
 /// STATUS of a data frame: WLENGTH = 24 bits, the eight DRDY bits.
@@ -19,6 +23,14 @@ const XL_DATA_RDY: u8 = 0x01;
 /// The ADXL355's noise at ODR 500 Hz (bandwidth 125 Hz): 25 µg/√Hz · √125 Hz, m/s² rms
 /// (≈ 18 codes at ±8 g).
 pub const ACCEL_NOISE_MPS2: f64 = 25e-6 * 9.806_65 * 11.180_339_887;
+
+/// The ADXL355's TEMP2, TEMP1 for the die temperature `temp_c` (°C, the scenario's
+/// `[temperature]` profile): the nearest code under the driver's nominal transfer
+/// function (`1885 − 9.05·(T − 25 °C)`, clamped to 12 bits; `encode_temp`); without a
+/// profile (`None`) the 25 °C code, 1885.
+pub fn temp_registers(temp_c: Option<f64>) -> [u8; 2] {
+    temp_bytes(temp_c.map_or(TEMP_INTERCEPT_CODE, encode_temp))
+}
 
 /// Faults of a run, by tick (half-open spans; default none).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -89,12 +101,19 @@ impl SensorChips {
     }
 
     /// The STATUS..ZDATA1 burst of tick `k` for X, Y in m/s² (Z: 1 g), with the device's
-    /// noise.
-    pub fn accel_burst(&mut self, k: usize, ax: f64, ay: f64) -> [u8; ACCEL_BURST] {
+    /// noise, and the die temperature `temp_c` in TEMP2, TEMP1 ([`temp_registers`]).
+    pub fn accel_burst(
+        &mut self,
+        k: usize,
+        ax: f64,
+        ay: f64,
+        temp_c: Option<f64>,
+    ) -> [u8; ACCEL_BURST] {
         use rand_distr::{Distribution, Normal};
         let noise = Normal::new(0.0, ACCEL_NOISE_MPS2).expect("a finite, positive σ");
         let mut b = [0u8; ACCEL_BURST];
         b[0] = XL_DATA_RDY;
+        b[2..4].copy_from_slice(&temp_registers(temp_c));
         for (i, a) in [ax, ay, f64::from(STANDARD_GRAVITY_MPS2)]
             .into_iter()
             .enumerate()
@@ -195,7 +214,7 @@ mod tests {
     use super::*;
     use paragyro_firmware::drivers::ad9959::{Channel, PumpPlan};
     use paragyro_firmware::drivers::ads131m08::Status;
-    use paragyro_firmware::drivers::adxl355::raw20_from_bytes;
+    use paragyro_firmware::drivers::adxl355::{raw20_from_bytes, temp_c_from_raw, temp_raw12};
     use paragyro_firmware::fil::DDS_LOG_BYTES;
 
     fn channels() -> [f64; 14] {
@@ -245,7 +264,7 @@ mod tests {
             ..Faults::default()
         };
         let mut chips = SensorChips::new([8.0, 4.0], Range::G8, faults, 1);
-        let b = chips.accel_burst(0, 39.2266, -12.0);
+        let b = chips.accel_burst(0, 39.2266, -12.0, None);
         assert_eq!(b[0] & 1, 1);
         let lsb = f64::from(Range::G8.mps2_per_lsb());
         let x = f64::from(raw20_from_bytes([b[4], b[5], b[6]])) * lsb;
@@ -254,12 +273,45 @@ mod tests {
         assert!((x - 39.2266).abs() <= tol && (y + 12.0).abs() <= tol);
         // noisy: two reads of the same acceleration differ
         assert_ne!(
-            chips.accel_burst(1, 39.2266, -12.0),
-            chips.accel_burst(1, 39.2266, -12.0)
+            chips.accel_burst(1, 39.2266, -12.0, None),
+            chips.accel_burst(1, 39.2266, -12.0, None)
         );
-        let held = chips.accel_burst(2, 1.0, 1.0);
-        assert_eq!(chips.accel_burst(3, 5.0, 5.0), held);
-        assert_ne!(chips.accel_burst(4, 5.0, 5.0), held);
+        let held = chips.accel_burst(2, 1.0, 1.0, Some(30.0));
+        assert_eq!(chips.accel_burst(3, 5.0, 5.0, Some(31.0)), held);
+        assert_ne!(chips.accel_burst(4, 5.0, 5.0, Some(31.0)), held);
+    }
+
+    /// TEMP2/TEMP1 of the model: the datasheet's 25 °C code without a profile, the nearest
+    /// code under the driver's transfer function with one (the code falling as the die
+    /// warms), TEMP2's upper nibble clear, the 12-bit range's ends where it clips.
+    #[test]
+    fn temperature_registers_encode_the_scenario_temperature() {
+        let code = |t: Option<f64>| {
+            let [t2, t1] = temp_registers(t);
+            assert_eq!(t2 & 0xF0, 0, "TEMP2 bits 7:4 are reserved");
+            temp_raw12(t2, t1)
+        };
+        assert_eq!(temp_registers(None), [0x07, 0x5D]);
+        assert_eq!(code(None), 1885);
+        assert_eq!(code(Some(25.0)), 1885);
+        // 9.05 codes per kelvin, falling: 35 °C → 1885 − 90.5 → 1794 or 1795
+        assert!((1794..=1795).contains(&code(Some(35.0))));
+        assert!(code(Some(35.0)) < code(Some(34.0)) && code(Some(-10.0)) > 1885);
+        // within half a code of the temperature, decoded by the firmware's driver
+        for i in 0..=400 {
+            let t = -40.0 + 0.3137 * f64::from(i);
+            let back = f64::from(temp_c_from_raw(code(Some(t))));
+            assert!((back - t).abs() <= 0.5 / 9.05 + 1e-4, "{t} °C → {back} °C");
+        }
+        // the code clips at the 12-bit range's ends
+        assert_eq!(code(Some(-400.0)), 0x0FFF);
+        assert_eq!(code(Some(400.0)), 0);
+        // the burst carries them at TEMP2, TEMP1 (bytes 2, 3 after STATUS, FIFO_ENTRIES)
+        let mut chips = SensorChips::new([8.0, 4.0], Range::G8, Faults::default(), 1);
+        let b = chips.accel_burst(0, 0.0, 0.0, Some(45.0));
+        assert_eq!([b[2], b[3]], temp_registers(Some(45.0)));
+        let b = chips.accel_burst(1, 0.0, 0.0, None);
+        assert_eq!([b[2], b[3]], [0x07, 0x5D]);
     }
 
     /// A plan for `hz` and the DDS log that writes its three words (CSR, CFTW0 each).

@@ -442,7 +442,12 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
             controls,
             n_controls: ctl.len() as u8,
             adc: chips.adc_frames(ku, &li.to_channels()),
-            accel: chips.accel_burst(ku, pa.accel_x * accel_si, pa.accel_y * accel_si),
+            accel: chips.accel_burst(
+                ku,
+                pa.accel_x * accel_si,
+                pa.accel_y * accel_si,
+                sc.temp_c(t),
+            ),
         };
         q.send(&msg.encode())?;
         let fw = q.recv()?;
