@@ -84,6 +84,11 @@ pub struct RlsConfig {
     /// 2·TCF·dT/dt: 66 ppm/s at −33 ppm/K and 1 K/s); faster is a jump for the change
     /// detector.
     pub drift_max_ppm_s: f64,
+    /// Temperature as an input (module `thermal`): the time constant, s, of the
+    /// smoothing that gives the die temperature's rate from the samples' `temp_c`; each
+    /// drift column's temperature coefficient is learned and the drift predicted from it.
+    /// 0 ignores the temperature (the drift is then followed by the walk alone).
+    pub tcf_tau_s: f64,
 }
 
 /// Input validation, gating and the change detector.
@@ -255,6 +260,7 @@ const TABLE2_CONFIG: Config = Config {
         drift_kappa: 3.0,
         drift_window_s: 1.0,
         drift_max_ppm_s: 100.0,
+        tcf_tau_s: 2.0,
     },
     monitor: MonitorConfig {
         gate_startup_s: 0.5,
@@ -492,7 +498,8 @@ impl RlsConfig {
         nonneg(r.relinearize_s, "rls.relinearize_s")?;
         nonneg(r.drift_kappa, "rls.drift_kappa")?;
         pos(r.drift_window_s, "rls.drift_window_s")?;
-        pos(r.drift_max_ppm_s, "rls.drift_max_ppm_s")
+        pos(r.drift_max_ppm_s, "rls.drift_max_ppm_s")?;
+        nonneg(r.tcf_tau_s, "rls.tcf_tau_s")
     }
 }
 

@@ -112,6 +112,10 @@ pub struct DriftTracker<T> {
     var: [T; 2],
     /// Updates taken since the last clear (the running means' start), saturating.
     n: u32,
+    /// The drift per update the temperature predicts (module [`crate::thermal`]; 0
+    /// without one) and that prediction's variance: the walk and the lead add them.
+    known: [T; 2],
+    known_var: [T; 2],
 }
 
 impl<T: Real> DriftTracker<T> {
@@ -173,19 +177,38 @@ impl<T: Real> DriftTracker<T> {
     /// the row filter's delay (scaled units).
     #[inline(always)]
     pub fn lead(&self, d: &DriftDesign<T>, axis: usize) -> T {
-        self.drift(d, axis) * d.lead
+        (self.drift(d, axis) + self.known(axis)) * d.lead
     }
 
-    /// The walk's variance for axis `axis` (per fourth update), scaled units.
+    /// The drift per update the temperature predicts for axis `axis` (0 without one).
+    #[inline(always)]
+    pub fn known(&self, axis: usize) -> T {
+        self.known.get(axis).copied().unwrap_or(T::ZERO)
+    }
+
+    /// Sets the predicted drift per update and its variance, both axes (module
+    /// [`crate::thermal`]).
+    pub fn set_known(&mut self, v: [T; 2], var: [T; 2]) {
+        (self.known, self.known_var) = (v, var);
+    }
+
+    /// The walk's variance for axis `axis` (per fourth update), scaled units: the measured
+    /// drift's and the temperature prediction's uncertainty's.
     #[inline(always)]
     pub fn q(&self, d: &DriftDesign<T>, axis: usize) -> T {
         let u = self.drift(d, axis);
-        d.kappa2 * u * u
+        let var = self.known_var.get(axis).copied().unwrap_or(T::ZERO);
+        d.kappa2 * (u * u + var)
     }
 
-    /// Forgets the measured drift (a covariance reset).
+    /// Forgets the measured drift (a covariance reset); the temperature's prediction is
+    /// kept (it is set again every block).
     pub fn clear(&mut self) {
-        *self = DriftTracker::default();
+        *self = DriftTracker {
+            known: self.known,
+            known_var: self.known_var,
+            ..DriftTracker::default()
+        };
     }
 }
 

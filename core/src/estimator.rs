@@ -29,6 +29,7 @@ mod tests;
 pub use state::MAX_CENTRE_DEV;
 
 use crate::config::{Config, ConfigError, ValidConfig};
+use crate::drift::DRIFT_COL;
 use crate::physics::{Physical, physical_from_theta, rate_dps_from_gamma};
 use crate::real::Real;
 use crate::rows::{Known, NROWS, RowSet};
@@ -39,6 +40,20 @@ use state::State;
 pub use crate::health::{Counters, Health};
 pub use crate::output::{StepOutput, event};
 pub use crate::sample::{Lockin, Sample};
+
+/// What the temperature learner knows ([`Estimator::thermal`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThermalEstimate {
+    /// Frequency temperature coefficients of the drive (ω_x) and sense (ω_y) modes,
+    /// ppm/K (NaN until learned).
+    pub tcf_ppm_k: [f64; 2],
+    /// Their standard deviations, ppm/K.
+    pub tcf_sigma_ppm_k: [f64; 2],
+    /// The smoothed die temperature, °C.
+    pub temp_c: f64,
+    /// Its rate, K/s.
+    pub rate_k_s: f64,
+}
 
 /// The estimator (runtime form of a validated [`Config`]): its design and its state.
 #[derive(Clone, Debug)]
@@ -182,6 +197,45 @@ impl<T: Real> Estimator<T> {
         let d = &self.design;
         let per_s = d.cfg.fs_hz * 1e6;
         [0, 1].map(|axis| self.state.drift.drift(&d.fit.drift, axis).to_f64() * per_s)
+    }
+
+    /// What the temperature learner knows (module [`crate::thermal`]): each mode's
+    /// frequency temperature coefficient, ppm/K, with its standard deviation, and the
+    /// smoothed die temperature and its rate. NaN where there is no temperature or the
+    /// coefficient is not learned yet.
+    pub fn thermal(&self) -> ThermalEstimate {
+        let (d, th) = (&self.design, &self.state.thermal);
+        // θ12 = −(ω_x² − γ² + 2β1), θ22 = −(ω_y² − γ²): dω²/dT = −sc·b
+        let w2 = [self.physical().wx2, self.wy2()];
+        let sc = [d.fit.sc1[DRIFT_COL].to_f64(), d.fit.sc2[DRIFT_COL].to_f64()];
+        let per_k = |j: usize, v: f64| 0.5e6 * sc[j] * v / w2[j];
+        let fit = |j: usize| {
+            let f = &th.fit[j];
+            if th.t_ref.is_some() && f.learned() {
+                (
+                    -per_k(j, f.b.to_f64()),
+                    per_k(j, libm::sqrt(f.p[2].to_f64())),
+                )
+            } else {
+                (f64::NAN, f64::NAN)
+            }
+        };
+        let (c0, s0) = fit(0);
+        let (c1, s1) = fit(1);
+        ThermalEstimate {
+            tcf_ppm_k: [c0, c1],
+            tcf_sigma_ppm_k: [s0, s1],
+            temp_c: th.level.map_or(f64::NAN, |t| t.to_f64()),
+            rate_k_s: th
+                .level
+                .map_or(f64::NAN, |_| th.rate.to_f64() * d.cfg.fs_hz),
+        }
+    }
+
+    /// The temperature learner's fits of θ12 and θ22 (scaled units; module
+    /// [`crate::thermal`]).
+    pub fn thermal_fits(&self) -> [crate::thermal::SlopeFit<T>; 2] {
+        self.state.thermal.fit
     }
 
     /// Samples processed.

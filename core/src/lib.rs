@@ -100,10 +100,11 @@ pub mod rls;
 pub mod rows;
 pub mod sample;
 pub mod svf;
+pub mod thermal;
 
 pub use complex::Cplx;
 pub use config::{Config, ConfigError, ValidConfig};
-pub use estimator::Estimator;
+pub use estimator::{Estimator, ThermalEstimate};
 pub use health::{Counters, Health};
 pub use output::StepOutput;
 pub use physics::Physical;

@@ -745,6 +745,18 @@ impl<T: Real, const N: usize> Rls<T, N> {
         self.x.get(j).copied().unwrap_or(T::ZERO)
     }
 
+    /// `P_jj = Σ_{k ≥ j} U_jk²·D_k`, the variance of parameter `j` (0 for `j ≥ N`).
+    pub fn variance_at(&self, j: usize) -> T {
+        let (Some(u), true) = (self.u.get(j), j < N) else {
+            return T::ZERO;
+        };
+        let mut p = T::ZERO;
+        for k in j..N {
+            p += u[k] * u[k] * self.d[k];
+        }
+        p
+    }
+
     /// `trace(P) = Σ_j D_j Σ_{i≤j} U_ij²` (`N(N+1)/2` multiply-adds).
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
     pub fn trace(&self) -> T {

@@ -15,6 +15,7 @@ use crate::physics::theta_from_physical;
 use crate::rate::RateDesign;
 use crate::real::Real;
 use crate::rows::{NROWS, RowDesign};
+use crate::thermal::ThermalDesign;
 
 /// Every `DECIDE_EVERY`-th sample the supervisor decides about a retune (20 Hz: plenty
 /// for a move of ≥ 0.5 s); lock tracking and ramps run every tick.
@@ -178,6 +179,8 @@ pub(crate) struct Fit<T> {
     pub walk_cap2: T,
     /// The drift tracker (`rls.drift_kappa`, `rls.drift_window_s`).
     pub drift: DriftDesign<T>,
+    /// The temperature learner (`rls.tcf_tau_s`).
+    pub thermal: ThermalDesign<T>,
 }
 
 impl<T: Real> Fit<T> {
@@ -218,6 +221,7 @@ impl<T: Real> Fit<T> {
                 2.0 / (2.0 * core::f64::consts::PI * cfg.svf_hz) * cfg.fs_hz,
                 cfg.rls.drift_max_ppm_s * 1e-6 / cfg.fs_hz,
             ),
+            thermal: ThermalDesign::new(cfg.rls.tcf_tau_s, cfg.fs_hz, cfg.rls.forgetting),
         }
     }
 }

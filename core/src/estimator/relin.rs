@@ -31,6 +31,7 @@
 
 use super::design::Design;
 use super::state::State;
+use crate::drift::DRIFT_COL;
 use crate::real::Real;
 use crate::rows::NominalConsts;
 
@@ -107,6 +108,7 @@ impl<T: Real> State<T> {
                     lin,
                     rls1,
                     rls2,
+                    thermal,
                     ..
                 } = self;
                 let p = &mut lin.pending;
@@ -119,6 +121,7 @@ impl<T: Real> State<T> {
                 let x2 = rls2.estimate();
                 rls1.set_estimate(core::array::from_fn(|j| x1[j] - p.x1[j]));
                 rls2.set_estimate(core::array::from_fn(|j| x2[j] - p.x2[j]));
+                thermal.rebase([p.x1[DRIFT_COL], p.x2[DRIFT_COL]]);
                 lin.relins = lin.relins.saturating_add(1);
             }
         }

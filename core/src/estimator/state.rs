@@ -19,6 +19,7 @@ use crate::real::Real;
 use crate::retune::{Supervisor, SupervisorSettings};
 use crate::rls::{Rls, RlsSettings};
 use crate::rows::{Envelopes, Known, NominalConsts, RowBuilder, RowSet};
+use crate::thermal::ThermalState;
 
 /// A commanded pump centre is accepted within this fraction of the reference (the
 /// configured centre, ω_ref): ±50 %, a sense resonance of 0.25–2.25× the design's ωy²
@@ -137,6 +138,8 @@ pub(crate) struct State<T: Real> {
     pub walk_prev24: Option<T>,
     /// The measured drift of θ12, θ22 (module `drift`).
     pub drift: DriftTracker<T>,
+    /// The temperature learner (module `thermal`).
+    pub thermal: ThermalState<T>,
     /// A warm start's first settle is due: the settle window counts from the end of the
     /// start-up gate (`persist`); cleared by that settle and by any reset.
     pub warm_first: bool,
@@ -185,6 +188,7 @@ impl<T: Real> State<T> {
             last_reset: 0,
             walk_prev24: None,
             drift: DriftTracker::default(),
+            thermal: ThermalState::default(),
             warm_first: false,
             change_pending: false,
             bound_learned: false,
@@ -231,6 +235,7 @@ impl<T: Real> State<T> {
             last_reset,
             walk_prev24,
             drift,
+            thermal,
             warm_first,
             change_pending,
             bound_learned,
@@ -251,6 +256,7 @@ impl<T: Real> State<T> {
         *rate = RateState::new(&d.rate);
         *walk_prev24 = None;
         *drift = DriftTracker::default();
+        *thermal = ThermalState::default();
         *stuck = StuckDetector::default();
         *det1 = ChangeDetector::new(&d.fit.change);
         *det2 = ChangeDetector::new(&d.fit.change);

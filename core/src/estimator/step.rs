@@ -34,6 +34,7 @@ impl<T: Real> State<T> {
         let mut events = 0u8;
         self.counters.samples = self.counters.samples.wrapping_add(1);
         let good = self.condition(d, s, &mut events);
+        let block = self.thermal.push(&d.fit.thermal, s.temp_c);
         let sweep = core::mem::replace(&mut self.pump_sweep_hz, T::from_f64(f64::NAN));
         // the held input, in locals (not a copy of the whole struct per stage)
         let Some(Conditioned {
@@ -67,6 +68,9 @@ impl<T: Real> State<T> {
         let wy2 = self.wy2_fast(d);
         let settled = self.settle(d, k, gated, updated, wy2, &mut events);
         self.maybe_relinearize(d, k, updated);
+        if block {
+            self.thermal_block(d, k);
+        }
         let health = self.assess(d, good, gated, settled, excited, pump_scale);
         let drive_amp = env.a[0].abs();
         let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
@@ -258,11 +262,13 @@ impl<T: Real> State<T> {
         let p = f.p_reset;
         if self.det1.push(&f.change, k, sum1) {
             self.rls1.reset_covariance(p);
+            self.thermal.jumped(0);
             Counters::bump(&mut self.counters.resets_drive, 1);
             *events |= event::CHANGE_DRIVE;
         }
         if self.det2.push(&f.change, k, sum2) {
             self.rls2.reset_covariance(p);
+            self.thermal.jumped(1);
             Counters::bump(&mut self.counters.resets_sense, 1);
             *events |= event::CHANGE_SENSE;
         }
@@ -303,25 +309,59 @@ impl<T: Real> State<T> {
         }
     }
 
-    /// Stage 4b: the drift's walk (module `drift`): one axis every other update, each
-    /// axis every fourth with four times the variance (the chip's tick budget; the drift is
-    /// slow against 8 ms). Returns the drift columns' estimates before this sample's rows,
+    /// Stage 4b: the drift's prediction from the temperature (module `thermal`) and its
+    /// walk (module `drift`): one axis every other update, each axis every fourth with
+    /// four times the variance (the chip's tick budget; the drift is slow against 8 ms). Returns the drift columns' estimates before this sample's rows,
     /// whose corrections measure the drift.
     #[inline(always)]
     fn walk_drift(&mut self, f: &super::design::Fit<T>, k: u64) -> [T; 2] {
-        if f.drift.enabled() && k & 1 == 0 {
+        if k & 1 == 0 {
+            // the temperature's predicted drift since the axis' last turn (module
+            // `thermal`; 0 without a temperature), then the walk
+            let on = f.drift.enabled();
             if k & 2 == 0 {
-                self.rls1
-                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
+                let v = self.thermal.advance(0, k, self.drift.known(0));
+                self.rls1.shift(DRIFT_COL, v);
+                if on {
+                    self.rls1
+                        .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
+                }
             } else {
-                self.rls2
-                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
+                let v = self.thermal.advance(1, k, self.drift.known(1));
+                self.rls2.shift(DRIFT_COL, v);
+                if on {
+                    self.rls2
+                        .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
+                }
             }
         }
         [
             self.rls1.estimate_at(DRIFT_COL),
             self.rls2.estimate_at(DRIFT_COL),
         ]
+    }
+
+    /// Stage 5c, every 0.1 s: the temperature learner's block (module `thermal`): each
+    /// drift column's estimate in the learner's frame, advanced over the row filter's
+    /// delay, against the block's temperature; then the drift it predicts, for the walk
+    /// and the lead. Learns on a settled estimate two drift windows after a reset (as the
+    /// measured drift).
+    #[inline(never)]
+    fn thermal_block(&mut self, d: &Design<T>, k: u64) {
+        let f = &d.fit;
+        let z = [
+            self.thermal.off[0] + self.rls1.estimate_at(DRIFT_COL) + self.drift.lead(&f.drift, 0),
+            self.thermal.off[1] + self.rls2.estimate_at(DRIFT_COL) + self.drift.lead(&f.drift, 1),
+        ];
+        let p_z = [
+            self.rls1.variance_at(DRIFT_COL),
+            self.rls2.variance_at(DRIFT_COL),
+        ];
+        let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
+        self.thermal.block(&f.thermal, z, p_z, learn);
+        let (v0, q0) = self.thermal.predicted(0);
+        let (v1, q1) = self.thermal.predicted(1);
+        self.drift.set_known([v0, v1], [q0, q1]);
     }
 
     /// Stage 5a: the settle test on ω̂y²; at the rising edge a pending change is cleared

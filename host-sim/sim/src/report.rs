@@ -115,8 +115,10 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
 /// th1*_est, th2*_est, `<phys>_true`, `<phys>_est`, rate_dps_true, rate_dps_est, drive_amp_um,
 /// sense_amp_um, one 0/1 column per health flag, resets, bad_samples, then the rate channel:
 /// rate_dps_slow, quadrature_dps, rate_valid (0/1), then the die temperature temp_c (°C; NaN
-/// without a `[temperature]` profile) and the drift the core follows on θ12 and θ22,
-/// drift_th12_ppm_s, drift_th22_ppm_s. `rate_dps_est` is the fast rate.
+/// without a `[temperature]` profile), the drift the core follows on θ12 and θ22,
+/// drift_th12_ppm_s, drift_th22_ppm_s, and the frequency temperature coefficients it has
+/// learned from the samples' temperature, tcf_wx_ppm_k, tcf_wy_ppm_k (ppm/K; NaN until
+/// learned, and without a sensor). `rate_dps_est` is the fast rate.
 pub fn csv_header() -> Vec<String> {
     let mut h: Vec<String> = ["t_s", "pump_hz", "pump_centre_hz", "pump_scale"]
         .iter()
@@ -146,6 +148,8 @@ pub fn csv_header() -> Vec<String> {
             "temp_c",
             "drift_th12_ppm_s",
             "drift_th22_ppm_s",
+            "tcf_wx_ppm_k",
+            "tcf_wy_ppm_k",
         ]
         .map(String::from),
     );
@@ -202,7 +206,13 @@ fn csv_row(r: &TraceRow, out: &mut String) {
         out.push_str(&fmt_f64(x));
     }
     out.push_str(if r.rate_valid { ",1" } else { ",0" });
-    for x in [r.temp_c, r.drift_ppm_s[0], r.drift_ppm_s[1]] {
+    for x in [
+        r.temp_c,
+        r.drift_ppm_s[0],
+        r.drift_ppm_s[1],
+        r.tcf_ppm_k[0],
+        r.tcf_ppm_k[1],
+    ] {
         out.push(',');
         out.push_str(&fmt_f64(x));
     }

@@ -11,6 +11,9 @@ use std::time::Instant;
 use anyhow::Context;
 use paragyro_core::physics::{Physical, physical_from_theta};
 use paragyro_core::{Config, Estimator, Real, Sample, StepOutput};
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+use rand_xoshiro::Xoshiro256PlusPlus;
 use std::collections::BTreeMap;
 
 use crate::effects::Effects;
@@ -341,6 +344,9 @@ pub fn closed_loop_hooked<T: Real>(
     let controls = sc.control_events();
     let mid_theta = sc.has_rate_profile();
     let mut next_ctrl = 0usize;
+    // the temperature sensor's noise: its own stream, so that the plant's is the same
+    // with and without a sensor
+    let mut temp_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x7E3D_5E4C);
     let mut pump_hz = est.initial_pump_hz();
     // the core's multiplier on the pump voltage scale (the amplitude part of the dither)
     let mut scale_mult = 1.0;
@@ -370,7 +376,11 @@ pub fn closed_loop_hooked<T: Real>(
             ],
             pump_hz,
             pump_scale: T::from_f64(s_k),
-            temp_c: None,
+            temp_c: sc
+                .temperature
+                .as_ref()
+                .and_then(|tc| tc.read(t, temp_rng.sample(StandardNormal)))
+                .map(T::from_f64),
         };
         let nominal_before = est.nominal_theta();
         let out = hooks.step(k, est, &mut sample, &last_out);
@@ -528,6 +538,7 @@ pub fn simulate<T: Real>(
                 rate_valid: ls.out.rate.valid,
                 temp_c: sc.temp_c(ls.t_s).unwrap_or(f64::NAN),
                 drift_ppm_s: ls.est.drift_ppm_s(),
+                tcf_ppm_k: ls.est.thermal().tcf_ppm_k,
             });
             for (bit, what) in EVENT_NAMES {
                 if ls.out.events & bit != 0 {

@@ -104,6 +104,9 @@ pub struct TraceRow {
     /// The drift of θ12 and θ22 the core's drift tracker follows, ppm/s of |θ_design|
     /// (`Estimator::drift_ppm_s`; θ12, θ22 carry −ω², so a falling frequency drifts up).
     pub drift_ppm_s: [f64; 2],
+    /// The frequency temperature coefficients the core has learned, drive and sense,
+    /// ppm/K (`Estimator::thermal`; NaN until learned).
+    pub tcf_ppm_k: [f64; 2],
 }
 
 /// Something that happened during a run (change detected, retune started, ...).

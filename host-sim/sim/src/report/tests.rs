@@ -46,6 +46,7 @@ fn synthetic_row(k: usize, twin: bool) -> TraceRow {
         rate_valid: k > 20,
         temp_c: 25.0 + 0.01 * k as f64,
         drift_ppm_s: [0.5 * k as f64, -2.0],
+        tcf_ppm_k: [-30.0 + k as f64, f64::NAN],
     };
     row.phys_est = row
         .phys_true
@@ -218,7 +219,7 @@ fn writes_all_outputs_and_the_csv_parses_back() {
     let csv = fs::read_to_string(dir.join("trace.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let ncol = 4 + 2 * 14 + 2 * 12 + 4 + HEALTH_NAMES.len() + 2 + 3 + 3;
+    let ncol = 4 + 2 * 14 + 2 * 12 + 4 + HEALTH_NAMES.len() + 2 + 3 + 5;
     assert_eq!(header.len(), ncol);
     assert_eq!(header, csv_header());
     assert_eq!(header[0], "t_s");
@@ -226,10 +227,10 @@ fn writes_all_outputs_and_the_csv_parses_back() {
     assert_eq!(header[18], "th11_est");
     assert_eq!(header[32], "mu_x_true");
     assert_eq!(header[44], "mu_x_est");
-    assert_eq!(header[ncol - 7], "bad_samples");
-    assert_eq!(header[ncol - 4], "rate_valid");
-    assert_eq!(header[ncol - 3], "temp_c");
-    assert_eq!(header[ncol - 1], "drift_th22_ppm_s");
+    assert_eq!(header[ncol - 9], "bad_samples");
+    assert_eq!(header[ncol - 6], "rate_valid");
+    assert_eq!(header[ncol - 5], "temp_c");
+    assert_eq!(header[ncol - 1], "tcf_wy_ppm_k");
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), result.trace.len());
     for (line, r) in rows.iter().zip(&result.trace) {
@@ -256,14 +257,16 @@ fn writes_all_outputs_and_the_csv_parses_back() {
             let want = if r.health >> bit & 1 == 1 { "1" } else { "0" };
             assert_eq!(f[60 + bit], want);
         }
-        assert_eq!(f[ncol - 8].parse::<u32>().unwrap(), r.resets);
-        assert_eq!(f[ncol - 7].parse::<u32>().unwrap(), r.bad_samples);
-        assert!(same(parse_field(f[ncol - 6]), r.rate_dps_slow));
-        assert!(same(parse_field(f[ncol - 5]), r.quadrature_dps));
-        assert_eq!(f[ncol - 4], if r.rate_valid { "1" } else { "0" });
-        assert!(same(parse_field(f[ncol - 3]), r.temp_c));
-        assert!(same(parse_field(f[ncol - 2]), r.drift_ppm_s[0]));
-        assert!(same(parse_field(f[ncol - 1]), r.drift_ppm_s[1]));
+        assert_eq!(f[ncol - 10].parse::<u32>().unwrap(), r.resets);
+        assert_eq!(f[ncol - 9].parse::<u32>().unwrap(), r.bad_samples);
+        assert!(same(parse_field(f[ncol - 8]), r.rate_dps_slow));
+        assert!(same(parse_field(f[ncol - 7]), r.quadrature_dps));
+        assert_eq!(f[ncol - 6], if r.rate_valid { "1" } else { "0" });
+        assert!(same(parse_field(f[ncol - 5]), r.temp_c));
+        assert!(same(parse_field(f[ncol - 4]), r.drift_ppm_s[0]));
+        assert!(same(parse_field(f[ncol - 3]), r.drift_ppm_s[1]));
+        assert!(same(parse_field(f[ncol - 2]), r.tcf_ppm_k[0]));
+        assert!(same(parse_field(f[ncol - 1]), r.tcf_ppm_k[1]));
     }
 
     // The PNGs are real images of some size.

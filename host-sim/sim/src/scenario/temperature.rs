@@ -8,6 +8,9 @@
 //! tcf_wy_ppm_k = -33.0      # frequency TCF of the sense mode, ppm/K
 //! tc_damping_ppm_k = 0.0    # μx, μy (damping) per K, ppm/K
 //! reference_c = 25.0        # the [plant] values hold at this temperature
+//! sensor = true             # the samples carry the temperature as the board reads it
+//! sensor_lsb_k = 0.1105     # its resolution (the ADXL355: 9.05 codes per K)
+//! sensor_noise_k = 0.05     # its white noise, K rms
 //! ```
 //!
 //! At temperature T the plant's ω_x, ω_y scale by (1 + TCF·(T − reference)), so ω_x² and
@@ -37,10 +40,33 @@ pub struct TemperatureSpec {
     /// Temperature at which the `[plant]` values hold, °C.
     #[serde(default = "default_reference_c")]
     pub reference_c: f64,
+    /// The samples carry the die temperature as the board's sensor reads it (the core
+    /// then learns the coefficients and predicts the drift, core module `thermal`);
+    /// false: no temperature reaches the core (the drift is followed by its walk alone).
+    #[serde(default = "default_sensor")]
+    pub sensor: bool,
+    /// The sensor's resolution, K (the ADXL355's 9.05 codes per K).
+    #[serde(default = "default_sensor_lsb_k")]
+    pub sensor_lsb_k: f64,
+    /// The sensor's white noise, K rms.
+    #[serde(default = "default_sensor_noise_k")]
+    pub sensor_noise_k: f64,
 }
 
 fn default_reference_c() -> f64 {
     25.0
+}
+
+fn default_sensor() -> bool {
+    true
+}
+
+fn default_sensor_lsb_k() -> f64 {
+    1.0 / 9.05
+}
+
+fn default_sensor_noise_k() -> f64 {
+    0.05
 }
 
 impl TemperatureSpec {
@@ -74,6 +100,21 @@ impl TemperatureSpec {
             }
         }
         0.0
+    }
+
+    /// The sensor's reading at `t_s` given a standard normal draw `n`: the temperature
+    /// plus `sensor_noise_k`·n, rounded to `sensor_lsb_k` (none: `sensor` false).
+    pub fn read(&self, t_s: f64, n: f64) -> Option<f64> {
+        if !self.sensor {
+            return None;
+        }
+        let t = self.temp_c(t_s) + self.sensor_noise_k * n;
+        let lsb = self.sensor_lsb_k;
+        Some(if lsb > 0.0 {
+            (t / lsb).round() * lsb
+        } else {
+            t
+        })
     }
 
     /// The plant at temperature `temp_c` (see the module docs).
@@ -122,6 +163,14 @@ impl TemperatureSpec {
         if !self.reference_c.is_finite() {
             return Some(("reference_c", "must be finite".into()));
         }
+        for (name, v) in [
+            ("sensor_lsb_k", self.sensor_lsb_k),
+            ("sensor_noise_k", self.sensor_noise_k),
+        ] {
+            if !(v.is_finite() && (0.0..=10.0).contains(&v)) {
+                return Some((name, format!("must be within 0…10 K (got {v})")));
+            }
+        }
         None
     }
 }
@@ -137,6 +186,9 @@ mod tests {
             tcf_wy_ppm_k: -33.0,
             tc_damping_ppm_k: 0.0,
             reference_c: 25.0,
+            sensor: true,
+            sensor_lsb_k: 0.1,
+            sensor_noise_k: 0.0,
         }
     }
 
@@ -163,6 +215,18 @@ mod tests {
     }
 
     #[test]
+    fn the_sensor_reads_the_profile_in_its_codes_or_not_at_all() {
+        let mut t = warm_up();
+        // 30 °C at 155 s; 0.1 K codes; a 1σ draw of 0.05 K noise
+        t.sensor_noise_k = 0.05;
+        let r = t.read(155.0, 1.0).unwrap();
+        assert!((r - 30.1).abs() < 1e-9, "{r}");
+        assert!((t.read(155.0, 0.0).unwrap() - 30.0).abs() < 1e-9);
+        t.sensor = false;
+        assert_eq!(t.read(155.0, 0.0), None);
+    }
+
+    #[test]
     fn bad_specs_name_their_field() {
         let mut t = warm_up();
         t.points = vec![[5.0, 25.0], [1.0, 30.0]];
@@ -170,6 +234,9 @@ mod tests {
         let mut t = warm_up();
         t.tcf_wy_ppm_k = f64::NAN;
         assert_eq!(t.problem().map(|p| p.0), Some("tcf_wy_ppm_k"));
+        let mut t = warm_up();
+        t.sensor_noise_k = -0.1;
+        assert_eq!(t.problem().map(|p| p.0), Some("sensor_noise_k"));
         assert!(warm_up().problem().is_none());
     }
 }
