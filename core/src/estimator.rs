@@ -232,6 +232,14 @@ impl<T: Real> Estimator<T> {
         }
     }
 
+    /// The warm-start record's thermal part: the smoothed die temperature, and the
+    /// learned dθ12/dT, dθ22/dT with their variances (NaN where unknown).
+    pub(crate) fn thermal_record(&self) -> (f64, [f64; 2], [f64; 2]) {
+        let f = &self.design.fit;
+        let sc = [f.sc1[DRIFT_COL].to_f64(), f.sc2[DRIFT_COL].to_f64()];
+        self.state.thermal.record(sc)
+    }
+
     /// The temperature learner's fits of θ12 and θ22 (scaled units; module
     /// [`crate::thermal`]).
     pub fn thermal_fits(&self) -> [crate::thermal::SlopeFit<T>; 2] {

@@ -21,14 +21,15 @@
 //! (firmware/src/persist.rs).
 
 use crate::config::Config;
+use crate::drift::DRIFT_COL;
 use crate::estimator::Estimator;
 use crate::physics::theta_from_physical;
 use crate::real::Real;
 
 /// Bytes of an encoded snapshot.
-pub const SNAPSHOT_LEN: usize = 156;
+pub const SNAPSHOT_LEN: usize = 196;
 /// Version of the encoding (bumped whenever the layout or the meaning changes).
-pub const SNAPSHOT_VERSION: u16 = 1;
+pub const SNAPSHOT_VERSION: u16 = 2;
 /// Magic at the start of a record.
 pub const SNAPSHOT_MAGIC: [u8; 4] = *b"PGWS";
 /// Smallest restored covariance per parameter (scaled units; the RLS must still move).
@@ -66,6 +67,13 @@ pub struct Snapshot {
     pub pump_centre_hz: f64,
     /// Traces of the column-scaled covariances (drive, sense).
     pub traces: [f64; 2],
+    /// The die temperature when it was taken, °C (NaN: no sensor).
+    pub temp_c: f64,
+    /// The learned temperature coefficients of θ12 and θ22, per K (module
+    /// [`crate::thermal`]; NaN where not learned).
+    pub dtheta_dt: [f64; 2],
+    /// Their variances, per K².
+    pub dtheta_dt_var: [f64; 2],
 }
 
 /// Why a record was not used.
@@ -175,6 +183,15 @@ impl Snapshot {
         w.put(&self.pump_centre_hz.to_le_bytes());
         w.put(&self.traces[0].to_le_bytes());
         w.put(&self.traces[1].to_le_bytes());
+        for v in [
+            self.temp_c,
+            self.dtheta_dt[0],
+            self.dtheta_dt[1],
+            self.dtheta_dt_var[0],
+            self.dtheta_dt_var[1],
+        ] {
+            w.put(&v.to_le_bytes());
+        }
         let crc = crc32(&w.buf[..SNAPSHOT_LEN - 4]);
         w.put(&crc.to_le_bytes());
         out
@@ -214,6 +231,9 @@ impl Snapshot {
         let theta2 = core::array::from_fn(|_| r.f64());
         let pump_centre_hz = r.f64();
         let traces = [r.f64(), r.f64()];
+        let temp_c = r.f64();
+        let dtheta_dt = [r.f64(), r.f64()];
+        let dtheta_dt_var = [r.f64(), r.f64()];
         Ok(Snapshot {
             config_crc,
             health_bits,
@@ -221,6 +241,9 @@ impl Snapshot {
             theta2,
             pump_centre_hz,
             traces,
+            temp_c,
+            dtheta_dt,
+            dtheta_dt_var,
         })
     }
 }
@@ -234,6 +257,7 @@ impl<T: Real> Estimator<T> {
     #[inline(never)]
     pub fn snapshot(&self) -> Snapshot {
         let (theta1, theta2) = self.theta();
+        let (temp_c, dtheta_dt, dtheta_dt_var) = self.thermal_record();
         Snapshot {
             config_crc: config_crc(self.config()),
             health_bits: self.health().bits(),
@@ -241,6 +265,9 @@ impl<T: Real> Estimator<T> {
             theta2,
             pump_centre_hz: self.pump_centre_hz(),
             traces: [self.traces().0, self.traces().1],
+            temp_c,
+            dtheta_dt,
+            dtheta_dt_var,
         }
     }
 
@@ -274,6 +301,23 @@ impl<T: Real> Estimator<T> {
     /// Refused (nothing changed) if [`Self::check_snapshot`] fails.
     #[inline(never)]
     pub fn warm_start(&mut self, snap: &Snapshot) -> Result<(), SnapshotError> {
+        self.warm_start_at(snap, None)
+    }
+
+    /// [`Self::warm_start`] at the die temperature `temp_c` (°C, `None`: unknown).
+    /// Where the record holds learned temperature coefficients and the temperature it
+    /// was taken at, θ12 and θ22 start moved to `temp_c` (θ + dθ/dT·ΔT) and the pump
+    /// centre with ω̂y (× √(ω̂y²(T)/ω̂y²(T_snap))); the learner keeps the coefficients
+    /// (learned, with their variances) and refers them to `temp_c`. Without either
+    /// temperature, or coefficients, the stored θ̂ as taken.
+    #[inline(never)]
+    pub fn warm_start_at(
+        &mut self,
+        snap: &Snapshot,
+        temp_c: Option<f64>,
+    ) -> Result<(), SnapshotError> {
+        self.check_snapshot(snap)?;
+        let snap = &self.at_temperature(snap, temp_c);
         self.check_snapshot(snap)?;
         let p_reset = self.config().rls.p_reset;
         let (d, st) = self.parts_mut();
@@ -290,6 +334,9 @@ impl<T: Real> Estimator<T> {
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
+        let sc = [d.fit.sc1[DRIFT_COL].to_f64(), d.fit.sc2[DRIFT_COL].to_f64()];
+        st.thermal
+            .restore(temp_c, snap.dtheta_dt, snap.dtheta_dt_var, sc);
         let fs = self.config().fs_hz;
         let wy2 = T::from_f64(self.wy2());
         let w = &mut self.design_mut().watch;
@@ -319,15 +366,46 @@ impl<T: Real> Estimator<T> {
     /// is empty), or the design values and the reason ([`Start::Cold`]).
     #[inline(never)]
     pub fn boot_from(&mut self, record: Option<&[u8]>) -> Start {
+        self.boot_from_at(record, None)
+    }
+
+    /// [`Self::boot_from`] at the die temperature `temp_c` (°C; the board reads its
+    /// sensor before the first tick): [`Self::warm_start_at`].
+    #[inline(never)]
+    pub fn boot_from_at(&mut self, record: Option<&[u8]>, temp_c: Option<f64>) -> Start {
         let snap = match record.map(Snapshot::decode) {
             None => return Start::Cold(SnapshotError::Missing),
             Some(Err(e)) => return Start::Cold(e),
             Some(Ok(s)) => s,
         };
-        match self.warm_start(&snap) {
+        match self.warm_start_at(&snap, temp_c) {
             Ok(()) => Start::Warm,
             Err(e) => Start::Cold(e),
         }
+    }
+
+    /// `snap` moved to the die temperature `temp_c` with its own coefficients (module
+    /// docs of [`Self::warm_start_at`]); unchanged where a temperature or a coefficient
+    /// is missing.
+    fn at_temperature(&self, snap: &Snapshot, temp_c: Option<f64>) -> Snapshot {
+        let dt = temp_c.map_or(f64::NAN, |t| t - snap.temp_c);
+        let ok = |v: f64| v.is_finite();
+        if !(ok(dt) && snap.dtheta_dt.iter().all(|v| ok(*v))) {
+            return *snap;
+        }
+        let mut s = *snap;
+        s.theta1[1] += snap.dtheta_dt[0] * dt;
+        s.theta2[1] += snap.dtheta_dt[1] * dt;
+        let wy2 = |t1: &[f64; 8], t2: &[f64; 6]| {
+            let g = (t1[3] - t2[3]) / 4.0;
+            -t2[1] + g * g
+        };
+        let ratio = wy2(&s.theta1, &s.theta2) / wy2(&snap.theta1, &snap.theta2);
+        if ratio > 0.0 {
+            s.pump_centre_hz *= libm::sqrt(ratio);
+        }
+        s.temp_c = temp_c.unwrap_or(f64::NAN);
+        s
     }
 }
 

@@ -338,6 +338,47 @@ impl<T: Real> ThermalState<T> {
         }
     }
 
+    /// A warm start at `temp_c` with the stored coefficients `slope` (θ per K) and their
+    /// variances, `sc` the columns' scales: the slopes are learned from the first block
+    /// on, referred to `temp_c`, their intercepts set by the first block taken. Nothing
+    /// is restored without a finite temperature and finite coefficients.
+    pub fn restore(&mut self, temp_c: Option<f64>, slope: [f64; 2], var: [f64; 2], sc: [f64; 2]) {
+        let Some(t) = temp_c.filter(|t| (TEMP_MIN_C..=TEMP_MAX_C).contains(t)) else {
+            return;
+        };
+        let finite = slope.iter().chain(&var).chain(&sc).all(|v| v.is_finite());
+        if !finite || sc.iter().any(|s| *s <= 0.0) {
+            return;
+        }
+        self.t_ref = Some(T::from_f64(t));
+        for j in 0..2 {
+            self.fit[j] = SlopeFit {
+                span: [T::from_f64(-LEARNED_SPAN_K), T::ZERO],
+                ..SlopeFit::start(
+                    T::from_f64(slope[j] / sc[j]),
+                    T::from_f64(var[j] / (sc[j] * sc[j])),
+                )
+            };
+        }
+    }
+
+    /// What a warm-start record keeps: the smoothed temperature (NaN: none), and each
+    /// learned slope in θ per K with its variance (NaN where not learned), `sc` the
+    /// columns' scales.
+    pub fn record(&self, sc: [f64; 2]) -> (f64, [f64; 2], [f64; 2]) {
+        let temp = self.level.map_or(f64::NAN, |t| t.to_f64());
+        let mut slope = [f64::NAN; 2];
+        let mut var = [f64::NAN; 2];
+        for j in 0..2 {
+            let f = &self.fit[j];
+            if self.t_ref.is_some() && f.learned() {
+                slope[j] = f.b.to_f64() * sc[j];
+                var[j] = f.p[2].to_f64() * sc[j] * sc[j];
+            }
+        }
+        (temp, slope, var)
+    }
+
     /// A covariance reset of `axis` (a jump): the intercept is unknown again, the slope
     /// is kept.
     pub fn jumped(&mut self, axis: usize) {

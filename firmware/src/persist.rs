@@ -389,12 +389,18 @@ impl<F: NorFlash> Store<F> {
 }
 
 /// The boot hook: the newest record of `store` into `est` (a freshly built estimator,
-/// before its first step). Warm, or cold with the reason: no record (`Missing`), a
-/// flash error (`Unreadable`), or what [`Estimator::boot_from`] refused.
+/// before its first step) at the die temperature `temp_c` (the accelerometer's reading
+/// at boot; the record's learned coefficients move θ and the pump to it). Warm, or cold
+/// with the reason: no record (`Missing`), a flash error (`Unreadable`), or what
+/// [`Estimator::boot_from_at`] refused.
 #[inline(never)]
-pub fn warm_start<F: NorFlash>(store: &mut Store<F>, est: &mut Estimator<f32>) -> Start {
+pub fn warm_start<F: NorFlash>(
+    store: &mut Store<F>,
+    est: &mut Estimator<f32>,
+    temp_c: Option<f32>,
+) -> Start {
     match store.load() {
-        Ok(Some(r)) => est.boot_from(Some(&r.snapshot)),
+        Ok(Some(r)) => est.boot_from_at(Some(&r.snapshot), temp_c.map(f64::from)),
         Ok(None) => Start::Cold(SnapshotError::Missing),
         Err(_) => Start::Cold(SnapshotError::Unreadable),
     }
@@ -427,7 +433,7 @@ pub struct SavePolicy {
 impl SavePolicy {
     /// The stm32f405 board's policy at 500 Hz: settled for 5 s, then the first save of
     /// the run; then after each retune (once settled again) but at most every 10 min,
-    /// and every hour regardless; 8 bytes programmed per tick (a 168-byte record in 21
+    /// and every hour regardless; 8 bytes programmed per tick (a 208-byte record in 26
     /// ticks; firmware/docs/notes.md "Warm start on the stm32f405 board" has the timing
     /// and the write budget).
     pub const BOARD: SavePolicy = SavePolicy {
@@ -562,8 +568,12 @@ pub struct Boot {
 /// The board's boot: [`warm_start`] from the store, then [`Store::prepare`] (the only
 /// erase of a run, before the loop starts).
 #[inline(never)]
-pub fn boot<F: NorFlash>(store: &mut Store<F>, est: &mut Estimator<f32>) -> Boot {
-    let start = warm_start(store, est);
+pub fn boot<F: NorFlash>(
+    store: &mut Store<F>,
+    est: &mut Estimator<f32>,
+    temp_c: Option<f32>,
+) -> Boot {
+    let start = warm_start(store, est, temp_c);
     Boot {
         start,
         prepared: store.prepare(),

@@ -8,6 +8,7 @@ fn settled_snapshot(est: &Estimator<f32>) -> Snapshot {
     let (t1, t2) = theta_from_physical(&est.config().nominal);
     let mut t1s = t1;
     t1s[1] *= 1.01; // a learned value, not the design's
+    let p = crate::physics::physical_from_theta(&t1s, &t2);
     Snapshot {
         config_crc: config_crc(est.config()),
         health_bits: SETTLED_BIT | 1,
@@ -15,6 +16,11 @@ fn settled_snapshot(est: &Estimator<f32>) -> Snapshot {
         theta2: t2,
         pump_centre_hz: est.pump_centre_hz() + 3.0,
         traces: [8e-6, 6e-6],
+        temp_c: 25.0,
+        // ω_x², ω_y² falling 60 and 66 ppm/K (frequency TCFs of −30 and −33 ppm/K):
+        // θ12, θ22 (−ω² + …) rise by as much of ω²
+        dtheta_dt: [60e-6 * p.wx2, 66e-6 * p.wy2],
+        dtheta_dt_var: [1e-16, 1e-16],
     }
 }
 
@@ -58,8 +64,8 @@ fn every_single_bit_flip_and_truncation_is_refused() {
         Err(SnapshotError::Magic)
     );
     let mut v2 = bytes;
-    v2[4] = 2;
-    assert_eq!(Snapshot::decode(&v2), Err(SnapshotError::Version(2)));
+    v2[4] = 1;
+    assert_eq!(Snapshot::decode(&v2), Err(SnapshotError::Version(1)));
 }
 
 #[test]
@@ -129,6 +135,49 @@ fn unusable_records_leave_the_design_with_a_flag() {
         est.boot_from(Some(&s.encode())),
         Start::Cold(SnapshotError::Config)
     );
+}
+
+#[test]
+fn a_record_taken_at_25_c_restored_at_35_c_starts_at_35_c() {
+    let mut est = Config::table2().build::<f32>().unwrap();
+    let s = settled_snapshot(&est);
+    let wy2 = |t1: &[f64; 8], t2: &[f64; 6]| {
+        let g = (t1[3] - t2[3]) / 4.0;
+        -t2[1] + g * g
+    };
+    let wy2_25 = wy2(&s.theta1, &s.theta2);
+    assert_eq!(est.boot_from_at(Some(&s.encode()), Some(35.0)), Start::Warm);
+    let (t1, t2) = est.theta();
+    // θ22 moved by its coefficient over 10 K: ω̂y² 660 ppm lower, and the pump with √ of it
+    assert!((t2[1] - s.theta2[1] - 10.0 * s.dtheta_dt[1]).abs() < 1e-12);
+    assert!((t1[1] - s.theta1[1] - 10.0 * s.dtheta_dt[0]).abs() < 1e-12);
+    let ratio = wy2(&t1, &t2) / wy2_25;
+    assert!((ratio - (1.0 - 660e-6)).abs() < 1e-9, "{ratio}");
+    let want = s.pump_centre_hz * ratio.sqrt();
+    assert!((est.initial_pump_hz() - want).abs() < 1e-6);
+    // 330 ppm of a 21.9 kHz pump
+    assert!((s.pump_centre_hz - want - 7.22).abs() < 0.05, "{want}");
+    // the coefficients are learned from the first tick on
+    let th = est.thermal();
+    for (got, want) in th.tcf_ppm_k.iter().zip([-30.0, -33.0]) {
+        assert!((got - want).abs() < 0.2, "{:?}", th.tcf_ppm_k);
+    }
+    // without a temperature now, or without one in the record: the record as taken
+    for (rec, now) in [
+        (s, None),
+        (
+            Snapshot {
+                temp_c: f64::NAN,
+                ..s
+            },
+            Some(35.0),
+        ),
+    ] {
+        let mut e = Config::table2().build::<f32>().unwrap();
+        assert_eq!(e.boot_from_at(Some(&rec.encode()), now), Start::Warm);
+        assert_eq!(e.theta(), (s.theta1, s.theta2));
+        assert!((e.initial_pump_hz() - s.pump_centre_hz).abs() < 1e-6);
+    }
 }
 
 #[test]

@@ -196,7 +196,7 @@ mod warm {
     impl Warm {
         /// The boot: warm or cold (logged with the reason), then the spare erased.
         #[inline(never)]
-        pub fn boot(flash: FLASH, est: &mut Estimator<f32>) -> Warm {
+        pub fn boot(flash: FLASH, est: &mut Estimator<f32>, temp_c: Option<f32>) -> Warm {
             let Ok(mut store) = Store::new(
                 BoardFlash(LockedFlash::new(flash)),
                 SLOT_A,
@@ -205,7 +205,7 @@ mod warm {
             ) else {
                 super::fail("flash store layout")
             };
-            let boot = persist::boot(&mut store, est);
+            let boot = persist::boot(&mut store, est, temp_c);
             defmt::info!("start: {} (spare prepared: {})", boot.start, boot.prepared);
             Warm {
                 store,
@@ -388,11 +388,12 @@ fn main() -> ! {
     {
         fail("configuration rejected")
     }
-    // the accelerometer's die temperature at boot, for the warm start (None: no plausible
-    // code yet, e.g. before the sensor's first conversion)
+    // the accelerometer's die temperature at boot: the warm start moves the stored
+    // estimate and the pump to it (None: no plausible code yet, e.g. before the sensor's
+    // first conversion; the record is then restored as taken)
     let boot_temp_c = app.read_temperature_c();
     defmt::info!("die temperature at boot: {} degC", boot_temp_c);
-    let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut());
+    let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut(), boot_temp_c);
     let app = &mut app;
     // a real ADXL355 is noisy: 8 identical X and Y codes in a row mean a stuck device
     app.set_accel_stuck_limit(paragyro_firmware::fil::ACCEL_STUCK_READS);

@@ -127,6 +127,9 @@ fn snapshot(i: u32) -> Snapshot {
         theta2: t2,
         pump_centre_hz: cfg.pump_centre_hz + i as f64,
         traces: [1e-6, 1e-6],
+        temp_c: 25.0,
+        dtheta_dt: [0.0; 2],
+        dtheta_dt_var: [1e-16; 2],
     }
 }
 
@@ -207,7 +210,7 @@ fn power_loss_at_every_byte_of_a_save_never_loses_the_previous_record() {
         }
         // the boot hook starts warm from whichever record survived
         let mut est = Config::table2().build::<f32>().unwrap();
-        assert_eq!(warm_start(&mut s, &mut est), Start::Warm, "cut {cut}");
+        assert_eq!(warm_start(&mut s, &mut est, None), Start::Warm, "cut {cut}");
         // and the next save after the reboot works
         assert!(s.save(&snapshot(4)).is_ok());
         assert_eq!(s.load().unwrap().map(|r| r.seq), Some(r.seq + 1));
@@ -229,7 +232,7 @@ fn first_save_torn_leaves_an_empty_store_and_a_cold_start() {
     let mut est = Config::table2().build::<f32>().unwrap();
     let design = est.theta();
     assert_eq!(
-        warm_start(&mut s, &mut est),
+        warm_start(&mut s, &mut est, None),
         Start::Cold(SnapshotError::Missing)
     );
     assert_eq!(est.theta(), design);
@@ -244,7 +247,7 @@ fn corrupt_and_unreadable_records_start_cold_with_the_reason() {
     let mut s = store(flash);
     let mut est = Config::table2().build::<f32>().unwrap();
     assert_eq!(
-        warm_start(&mut s, &mut est),
+        warm_start(&mut s, &mut est, None),
         Start::Cold(SnapshotError::Missing),
         "a record failing its CRC is no record"
     );
@@ -252,7 +255,7 @@ fn corrupt_and_unreadable_records_start_cold_with_the_reason() {
     flash.dead = true; // the flash does not answer
     let mut s = store(flash);
     assert_eq!(
-        warm_start(&mut s, &mut est),
+        warm_start(&mut s, &mut est, None),
         Start::Cold(SnapshotError::Unreadable)
     );
     // a valid record of another configuration: refused by the core
@@ -261,14 +264,14 @@ fn corrupt_and_unreadable_records_start_cold_with_the_reason() {
     other.config_crc ^= 1;
     s.save(&other).unwrap();
     assert_eq!(
-        warm_start(&mut s, &mut est),
+        warm_start(&mut s, &mut est, None),
         Start::Cold(SnapshotError::Config)
     );
 }
 
-/// Slots of two erase sectors: three records each.
+/// Slots of three erase sectors: three records each.
 fn big_store(flash: SimFlash) -> Store<SimFlash> {
-    Store::new(flash, 0, 2 * ERASE as u32, 2 * ERASE as u32).unwrap()
+    Store::new(flash, 0, 3 * ERASE as u32, 3 * ERASE as u32).unwrap()
 }
 
 /// A save through the loop's path: begin, then `chunk` bytes per call.
@@ -287,7 +290,7 @@ fn chunked_save(s: &mut Store<SimFlash>, snap: &Snapshot, chunk: usize) -> Resul
 
 #[test]
 fn the_loop_appends_then_switches_to_the_erased_slot_and_never_erases() {
-    let mut s = big_store(SimFlash::new(4 * ERASE));
+    let mut s = big_store(SimFlash::new(6 * ERASE));
     assert_eq!(s.records_per_slot(), 3);
     assert_eq!(s.prepare(), Ok(false), "blank spare: no erase");
     for i in 1..=6u32 {
@@ -303,7 +306,7 @@ fn the_loop_appends_then_switches_to_the_erased_slot_and_never_erases() {
     for (i, seq) in [1u32, 2, 3, 4, 5, 6].iter().enumerate() {
         let at = i * RECORD_LEN
             + if i >= 3 {
-                2 * ERASE - 3 * RECORD_LEN
+                3 * ERASE - 3 * RECORD_LEN
             } else {
                 0
             };
@@ -324,7 +327,7 @@ fn the_loop_appends_then_switches_to_the_erased_slot_and_never_erases() {
 
 #[test]
 fn power_loss_at_every_byte_of_a_chunked_save_keeps_the_previous_record() {
-    let mut good = big_store(SimFlash::new(4 * ERASE));
+    let mut good = big_store(SimFlash::new(6 * ERASE));
     for i in 1..=2 {
         chunked_save(&mut good, &snapshot(i), 8).unwrap();
     }
@@ -350,7 +353,7 @@ fn power_loss_at_every_byte_of_a_chunked_save_keeps_the_previous_record() {
         assert_eq!(s.prepare(), Ok(false));
         assert_eq!(chunked_save(&mut s, &snapshot(4), 8), Ok(3));
         let mut flash = s.release();
-        let at = 2 * ERASE;
+        let at = 3 * ERASE;
         assert_eq!(flash.mem[at..at + 4], RECORD_MAGIC, "cut {cut}");
         let mut s = big_store(flash.clone());
         let r = s.load().unwrap().unwrap();
@@ -430,9 +433,9 @@ fn the_saver_on_the_replay_run_saves_once_settled_in_chunks_and_boots_warm_from_
     let cap = DdsCapture::new(DEFAULT_SYSCLK_HZ);
     let mut io = cap.io_update();
     let mut app = replay_app(table, &cap, &mut io, &mut NoopDelay::new()).expect("setup");
-    let mut s = big_store(SimFlash::new(4 * ERASE));
+    let mut s = big_store(SimFlash::new(6 * ERASE));
     // a cold boot from the empty store: the flag says why
-    let b = boot(&mut s, app.estimator_mut());
+    let b = boot(&mut s, app.estimator_mut(), None);
     assert_eq!(
         b,
         Boot {
@@ -473,8 +476,12 @@ fn the_saver_on_the_replay_run_saves_once_settled_in_chunks_and_boots_warm_from_
     );
     assert_eq!(
         events[1],
-        (k0 + 21, SaveEvent::Written(1), events[1].2),
-        "168 B in 21 ticks"
+        (
+            k0 + RECORD_LEN as u32 / 8,
+            SaveEvent::Written(1),
+            events[1].2
+        ),
+        "{RECORD_LEN} B in 8 B a tick"
     );
     assert!(
         events.iter().all(|e| !matches!(e.1, SaveEvent::Failed(_))),
@@ -504,9 +511,31 @@ fn the_saver_on_the_replay_run_saves_once_settled_in_chunks_and_boots_warm_from_
     let mut s = big_store(flash);
     let newest = s.load().unwrap().unwrap();
     assert_eq!(newest.seq, sv.written);
-    let b = boot(&mut s, app2.estimator_mut());
+    let b = boot(&mut s, app2.estimator_mut(), None);
     assert_eq!(b.start, Start::Warm);
     let snap = Snapshot::decode(&newest.snapshot).unwrap();
     let (t1, t2) = app2.estimator().theta();
     assert_eq!((t1, t2), (snap.theta1, snap.theta2));
+}
+
+#[test]
+fn the_boot_moves_a_record_to_the_die_temperature_it_reads() {
+    // a record taken at 25 °C with the sense frequency's learned −33 ppm/K (θ22 rises
+    // 66 ppm of ω_y² per K), booted at 35 °C: the pump starts 330 ppm lower
+    let rec = Snapshot {
+        temp_c: 25.0,
+        dtheta_dt: [0.0, 66e-6 * Config::table2().nominal.wy2],
+        dtheta_dt_var: [1e-16, 1e-16],
+        ..snapshot(0)
+    };
+    let mut s = store(SimFlash::new(2 * ERASE));
+    assert!(s.save(&rec).is_ok());
+    let mut est = Config::table2().build::<f32>().unwrap();
+    assert_eq!(warm_start(&mut s, &mut est, Some(35.0)), Start::Warm);
+    let dp = rec.pump_centre_hz - est.initial_pump_hz();
+    assert!((dp - 330e-6 * rec.pump_centre_hz).abs() < 0.05, "{dp} Hz");
+    // no reading at boot: the record as taken
+    let mut est = Config::table2().build::<f32>().unwrap();
+    assert_eq!(warm_start(&mut s, &mut est, None), Start::Warm);
+    assert!((est.initial_pump_hz() - rec.pump_centre_hz).abs() < 1e-6);
 }
