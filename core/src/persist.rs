@@ -307,7 +307,8 @@ impl<T: Real> Estimator<T> {
     /// [`Self::warm_start`] at the die temperature `temp_c` (°C, `None`: unknown).
     /// Where the record holds learned temperature coefficients and the temperature it
     /// was taken at, θ12 and θ22 start moved to `temp_c` (θ + dθ/dT·ΔT) and the pump
-    /// centre with ω̂y (× √(ω̂y²(T)/ω̂y²(T_snap))); the learner keeps the coefficients
+    /// centre at twice the sense resonance there, 2·f0·√ω̂y²(T); the learner keeps the
+    /// coefficients
     /// (learned, with their variances) and refers them to `temp_c`. Without either
     /// temperature, or coefficients, the stored θ̂ as taken.
     #[inline(never)]
@@ -400,9 +401,11 @@ impl<T: Real> Estimator<T> {
             let g = (t1[3] - t2[3]) / 4.0;
             -t2[1] + g * g
         };
-        let ratio = wy2(&s.theta1, &s.theta2) / wy2(&snap.theta1, &snap.theta2);
-        if ratio > 0.0 {
-            s.pump_centre_hz *= libm::sqrt(ratio);
+        // the pump at twice the sense resonance there (where the retune would put it;
+        // the stored centre may sit up to the retune's deadband off)
+        let wy2_t = wy2(&s.theta1, &s.theta2);
+        if wy2_t > 0.0 {
+            s.pump_centre_hz = 2.0 * self.config().f0_hz * libm::sqrt(wy2_t);
         }
         s.temp_c = temp_c.unwrap_or(f64::NAN);
         s

@@ -153,10 +153,12 @@ fn a_record_taken_at_25_c_restored_at_35_c_starts_at_35_c() {
     assert!((t1[1] - s.theta1[1] - 10.0 * s.dtheta_dt[0]).abs() < 1e-12);
     let ratio = wy2(&t1, &t2) / wy2_25;
     assert!((ratio - (1.0 - 660e-6)).abs() < 1e-9, "{ratio}");
-    let want = s.pump_centre_hz * ratio.sqrt();
+    // the pump at 2·f_y(35 °C), 330 ppm (7.2 Hz) below 2·f_y(25 °C)
+    let f0 = est.config().f0_hz;
+    let want = 2.0 * f0 * wy2(&t1, &t2).sqrt();
     assert!((est.initial_pump_hz() - want).abs() < 1e-6);
-    // 330 ppm of a 21.9 kHz pump
-    assert!((s.pump_centre_hz - want - 7.22).abs() < 0.05, "{want}");
+    let at_25 = 2.0 * f0 * wy2_25.sqrt();
+    assert!((at_25 - want - 330e-6 * at_25).abs() < 0.01, "{want}");
     // the coefficients are learned from the first tick on
     let th = est.thermal();
     for (got, want) in th.tcf_ppm_k.iter().zip([-30.0, -33.0]) {
