@@ -12,9 +12,8 @@
 //!    fixed, short latency after DRDY;
 //! 2. the [`Sample`]: lock-in outputs in µm through each axis' [`LockinCalibration`] (the
 //!    single conversion point), the accelerometer's X and Y (drive, sense axis), the die
-//!    temperature (the accelerometer's die: the TEMP2/TEMP1 bytes of the same burst, no
-//!    extra transaction, taken every [`TEMP_EVERY`]-th tick and held between), and the
-//!    pump frequency and scale *in effect* (what the DDS realised at the previous
+//!    temperature (module `temp`), and the pump frequency and scale *in effect* (what the
+//!    DDS realised at the previous
 //!    IO_UPDATE, not what the core asked for);
 //! 3. [`Estimator::step`];
 //! 4. **DDS written last**: the core's `pump_hz_next`, clamped to the [`PumpGuard`], is
@@ -36,11 +35,9 @@
 //! core flags, counts and skips the sample (and holds θ̂). A lock-in code at the ADC's
 //! full scale, or an accelerometer code at the end of its 20-bit range, is replaced by a
 //! value beyond the core's full scale ([`paragyro_core::config::MonitorConfig`]), so the
-//! core counts it as saturated even when the ADC clips below the core's limit. The
-//! temperature is an optional input: a failed or stuck accelerometer read on a tick that
-//! takes the temperature, or a code outside [`TEMP_PLAUSIBLE_C`], gives `temp_c: None`
-//! (held until the next such tick) without a fault bit of its own. The
-//! firmware's own [`FwCounters`] say which chip failed and how.
+//! core counts it as saturated even when the ADC clips below the core's limit. A bad
+//! temperature is `temp_c: None` (module `temp`). The firmware's own [`FwCounters`] say
+//! which chip failed and how.
 //!
 //! **DDS errors.** Words reach the DDS cores only at IO_UPDATE, so a tick whose writes
 //! fail does not pulse: the DDS keeps its old words, the pump in effect (and so the next
@@ -93,10 +90,12 @@ use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOu
 
 use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
 use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
-use crate::drivers::adxl355::{self, Adxl355};
+use crate::drivers::adxl355::Adxl355;
 
 mod pump;
+mod temp;
 pub use pump::{PumpAmplitude, PumpGuard, half_steps};
+pub use temp::{TEMP_EVERY, TEMP_PLAUSIBLE_C, plausible_temp_c};
 
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
 ///
@@ -318,31 +317,6 @@ fn beyond(full_scale: f64) -> f32 {
 /// The 20-bit code range of the ADXL355 ends at these codes (clipping).
 const ACCEL_CODE_MAX: i32 = 0x7_FFFF;
 const ACCEL_CODE_MIN: i32 = -0x8_0000;
-
-/// Die temperatures outside this window, °C, are taken for a bad read (e.g. the sensor's
-/// reset code 0, ≈ 233 °C, before its first conversion or with TEMP_OFF set) and give
-/// `temp_c: None`.
-pub const TEMP_PLAUSIBLE_C: (f32, f32) = (-60.0, 150.0);
-
-/// The tick takes the die temperature from every this many sample bursts (10 Hz at
-/// 500 Hz; the first tick after [`App::configure`] is one) and holds it between: the die
-/// warms by millikelvins in 0.1 s, below one code (0.11 K), and the conversion then costs
-/// the tick a countdown, not a conversion and a store every sample.
-pub const TEMP_EVERY: u8 = 50;
-
-/// [`TEMP_PLAUSIBLE_C`] as ADXL355 temperature codes (the code falls as the die warms):
-/// 754 ≈ 149.97 °C, 2654 ≈ −59.97 °C (`adxl355::temp_c_from_raw`; the unit test checks
-/// every code). The code is tested, not the temperature: one integer range test instead
-/// of two floating-point comparisons.
-const TEMP_PLAUSIBLE_CODES: (u16, u16) = (754, 2654);
-
-/// The ADXL355's temperature code in °C, `None` outside [`TEMP_PLAUSIBLE_C`].
-pub fn plausible_temp_c(raw12: u16) -> Option<f32> {
-    let (lo, hi) = TEMP_PLAUSIBLE_CODES;
-    (lo..=hi)
-        .contains(&raw12)
-        .then(|| adxl355::temp_c_from_raw(raw12))
-}
 
 fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
     let [x0, a1r, a1i, a2r, a2i, a3r, a3i] = x;
@@ -656,18 +630,6 @@ where
         let asf = self.amplitude.word_for(1.0);
         self.apply(plan, asf, io)?;
         Ok(plan)
-    }
-
-    /// The accelerometer's die temperature, °C, read now in its own transaction (TEMP2,
-    /// TEMP1): for the boot, before the core's warm start. `None` on a bus error or a code
-    /// outside [`TEMP_PLAUSIBLE_C`] (e.g. the sensor's reset code before its first
-    /// conversion). The ticks take the temperature from their sample burst instead.
-    pub fn read_temperature_c(&mut self) -> Option<f32> {
-        self.chips
-            .accel
-            .read_temperature_raw()
-            .ok()
-            .and_then(plausible_temp_c)
     }
 
     /// The 500 Hz tick (DRDY interrupt body): read, step, command. Bounded, allocation-
@@ -1059,20 +1021,6 @@ mod tests {
             .map(|xy| s.push(xy))
             .collect();
         assert_eq!(seen, [false, false, true, true, false, false, true]);
-    }
-
-    /// The code window is the temperature window, code by code.
-    #[test]
-    fn the_temperature_code_window_is_the_celsius_window() {
-        let (lo, hi) = TEMP_PLAUSIBLE_C;
-        let mut inside = 0;
-        for code in 0..=0x0FFF {
-            let t = adxl355::temp_c_from_raw(code);
-            let want = (lo..=hi).contains(&t).then_some(t);
-            assert_eq!(plausible_temp_c(code), want, "code {code}: {t} °C");
-            inside += usize::from(want.is_some());
-        }
-        assert_eq!(inside, 2654 - 754 + 1);
     }
 
     /// `f64_as_u32` is the saturating `as u32` cast.

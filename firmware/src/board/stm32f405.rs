@@ -388,9 +388,8 @@ fn main() -> ! {
     {
         fail("configuration rejected")
     }
-    // the accelerometer's die temperature at boot: the warm start moves the stored
-    // estimate and the pump to it (None: no plausible code yet, e.g. before the sensor's
-    // first conversion; the record is then restored as taken)
+    // the die temperature at boot: the warm start moves the record and the pump to it
+    // (None: no plausible code yet, the record restored as taken)
     let boot_temp_c = app.read_temperature_c();
     defmt::info!("die temperature at boot: {} degC", boot_temp_c);
     let mut warm = warm::Warm::boot(dp.FLASH, app.estimator_mut(), boot_temp_c);
