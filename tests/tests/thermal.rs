@@ -1,9 +1,12 @@
 //! Temperature: a warm-up is followed as a drift (no covariance reset, the rate valid), a
-//! jump is still detected and retuned (`core/src/drift.rs`).
+//! jump is still detected and retuned (`core/src/drift.rs`); with the die temperature in
+//! the samples the modes' coefficients are learned, a temperature cycle is followed, and a
+//! warm start at another temperature starts at 2·f_y there (`core/src/thermal.rs`).
 
-use paragyro_simulator::runner::{Precision, RunOptions, run};
+use paragyro_core::persist::Start;
+use paragyro_simulator::runner::{Precision, RunOptions, closed_loop, core_config, run};
 use paragyro_simulator::scenario::{EventKind, Scenario};
-use paragyro_simulator::trace::RunResult;
+use paragyro_simulator::trace::{RunResult, TraceRow};
 
 fn run_f32(sc: &Scenario) -> RunResult {
     let opts = RunOptions {
@@ -56,12 +59,109 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
         .map(|x| (x.phys_est[4] - x.phys_true[4]).abs())
         .fold(0.0, f64::max);
     assert!(worst < 3e-6, "ω̂y² {worst:e} off during the warm-up");
+    // the die temperature reaches the core (the scenario's ADXL355-like sensor): one
+    // 10 K ramp teaches both frequency coefficients to within 2 ppm/K
+    let tcf = last.tcf_ppm_k;
+    assert!(
+        (tcf[0] + 30.0).abs() < 2.0 && (tcf[1] + 33.0).abs() < 2.0,
+        "learned TCFs {tcf:?} ppm/K (truth −30, −33)"
+    );
 
-    // the same warm-up without drift tracking: the detector reads it as jumps
+    // without the sensor the walk alone follows the same ramp
+    sc.temperature.as_mut().expect("a profile").sensor = false;
+    let walk = run_f32(&sc);
+    assert_eq!(resets_after(&walk, 2.5), 0, "resets without the sensor");
+    assert!(
+        walk.trace
+            .iter()
+            .all(|x| x.tcf_ppm_k.iter().all(|v| v.is_nan()))
+    );
+    // and without drift tracking either, the detector reads it as jumps
     sc.estimator.drift_kappa = Some(0.0);
     let off = run_f32(&sc);
     let resets = off.trace.last().expect("a trace").resets;
     assert!(resets > 50, "{resets} resets without drift tracking");
+}
+
+/// Covariance resets after `t_s`.
+fn resets_after(r: &RunResult, t_s: f64) -> u32 {
+    let at = r.trace.iter().find(|x| x.t_s >= t_s).expect("in the run");
+    r.trace.last().expect("a trace").resets - at.resets
+}
+
+/// The warm-up, then back: 25 → 35 °C over 5–25 s, held 5 s, 35 → 25 °C over 30–50 s.
+fn cycle() -> Scenario {
+    let mut sc = warm_up();
+    sc.duration_s = 52.0;
+    let t = sc.temperature.as_mut().expect("a profile");
+    t.points = vec![
+        [0.0, 25.0],
+        [5.0, 25.0],
+        [25.0, 35.0],
+        [30.0, 35.0],
+        [50.0, 25.0],
+    ];
+    sc
+}
+
+#[test]
+fn a_temperature_cycle_is_followed_with_the_die_temperature() {
+    let mut sc = cycle();
+    let r = run_f32(&sc);
+    assert_eq!(resets_after(&r, 2.5), 0, "resets over the cycle");
+    let ramps: Vec<&TraceRow> = r
+        .trace
+        .iter()
+        .filter(|x| (5.0..25.0).contains(&x.t_s) || (30.0..50.0).contains(&x.t_s))
+        .collect();
+    let valid = ramps.iter().filter(|x| x.rate_valid).count() as f64 / ramps.len() as f64;
+    assert!(
+        valid >= 0.95,
+        "rate valid on {:.1} % of the ramps",
+        100.0 * valid
+    );
+    // the walk alone does not hold the way back: the cooling ramp is read as jumps (its
+    // measured drift is learned as the estimate's wander after the first ramp)
+    sc.temperature.as_mut().expect("a profile").sensor = false;
+    let walk = run_f32(&sc);
+    let resets = resets_after(&walk, 2.5);
+    assert!(
+        resets > 50,
+        "{resets} resets over the cycle without the sensor"
+    );
+}
+
+#[test]
+fn a_warm_start_at_another_temperature_starts_at_its_2_f_y() {
+    // a record written at the end of the warm-up (35 °C), the coefficients learned
+    let sc = warm_up();
+    let build = || core_config(&sc).build::<f32>().expect("configuration");
+    let mut est = build();
+    closed_loop(&sc, sc.seed, &mut est, |_| {}, |_| {}).expect("the warm-up");
+    let rec = est.snapshot();
+    assert!(
+        (rec.temp_c - 35.0).abs() < 0.2,
+        "written at {} °C",
+        rec.temp_c
+    );
+    assert!(rec.dtheta_dt.iter().all(|v| v.is_finite()), "{rec:?}");
+    // restored on a board that reads 25 °C: the pump on its first tick within 0.5 Hz of
+    // twice the sense resonance at 25 °C (the record's own centre is 7 Hz away)
+    let f0 = core_config(&sc).f0_hz;
+    let two_fy = |t_s: f64| 2.0 * f0 * sc.plant_at(t_s).phys[4].sqrt();
+    let (at_25, at_35) = (two_fy(0.0), two_fy(26.0));
+    assert!((rec.pump_centre_hz - at_25).abs() > 5.0);
+    let mut warm = build();
+    assert_eq!(
+        warm.boot_from_at(Some(&rec.encode()), Some(25.0)),
+        Start::Warm
+    );
+    let off = warm.initial_pump_hz() - at_25;
+    assert!(off.abs() < 0.5, "pump {off:+.3} Hz from 2·f_y(25 °C)");
+    // without a reading at boot: the record as taken, at 35 °C's pump
+    let mut blind = build();
+    assert_eq!(blind.boot_from(Some(&rec.encode())), Start::Warm);
+    assert!((blind.initial_pump_hz() - at_35).abs() < 2.5);
 }
 
 #[test]

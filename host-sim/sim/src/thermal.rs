@@ -8,6 +8,9 @@
 //! sits at twice the true sense resonance, and the same per kelvin of die temperature (a
 //! table and `thermal.png`).
 
+mod scale;
+pub use scale::{ScaleBin, scale_bins};
+
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -120,8 +123,17 @@ pub struct ThermalReport {
     /// to the oracle twin's (its pump centre at twice the true sense resonance); `None`
     /// without the twin.
     pub sense_amp_vs_oracle_min: Option<f64>,
+    /// The samples carry the die temperature (the scenario's `sensor`).
+    pub sensor: bool,
+    /// The frequency TCFs (drive, sense) the core has learned by the end of the run, and
+    /// the scenario's, ppm/K (NaN: not learned).
+    pub tcf_learned_ppm_k: [f64; 2],
+    pub tcf_truth_ppm_k: [f64; 2],
     /// Per kelvin of die temperature during the change.
     pub bins: Vec<KelvinBin>,
+    /// The rate's scale factor and bias per 5 K, where the rate alternates between ±Ω
+    /// (module `scale`; empty otherwise).
+    pub scale: Vec<ScaleBin>,
 }
 
 fn rms(v: impl Iterator<Item = f64>) -> f64 {
@@ -245,6 +257,10 @@ impl ThermalReport {
                 .fold(0.0, f64::max),
             wy2_rate_max_ppm_s: wy2_rate,
             sense_amp_vs_oracle_min: None,
+            sensor: tp.sensor,
+            tcf_learned_ppm_k: trace.last().map_or([f64::NAN; 2], |r| r.tcf_ppm_k),
+            tcf_truth_ppm_k: [tp.tcf_wx_ppm_k, tp.tcf_wy_ppm_k],
+            scale: scale_bins(&during, 5.0),
             bins,
         })
     }
@@ -297,7 +313,22 @@ impl ThermalReport {
             self.wy2_rate_max_ppm_s
         );
         let _ = writeln!(s, "| figure | value |\n|---|---|");
+        let [lx, ly] = self.tcf_learned_ppm_k;
+        let [tx, ty] = self.tcf_truth_ppm_k;
         let rows = [
+            (
+                "die temperature in the samples",
+                if self.sensor {
+                    "yes"
+                } else {
+                    "no (the walk alone)"
+                }
+                .to_string(),
+            ),
+            (
+                "frequency TCFs learned by the end, drive / sense (the truth's)",
+                format!("{lx:.2} / {ly:.2} ppm/K ({tx:.2} / {ty:.2})"),
+            ),
             (
                 "covariance resets after start-up",
                 format!("{}", self.resets_after_startup),
@@ -365,11 +396,32 @@ impl ThermalReport {
                 b.pump_offset_mean_hz
             );
         }
+        if !self.scale.is_empty() {
+            let worst =
+                |f: fn(&ScaleBin) -> f64| self.scale.iter().map(|b| f(b).abs()).fold(0.0, f64::max);
+            let _ = writeln!(
+                s,
+                "\nThe rate alternates between ±Ω: its scale factor and bias per 5 K (each side's \
+                 first {} s after a step left out). Largest |scale factor error| {:.0} ppm, \
+                 largest |bias| {:.3} °/s.\n\n| die °C | samples +Ω / −Ω | scale factor error, ppm | bias, °/s |\n|---|---|---|---|",
+                scale::SETTLE_S,
+                worst(|b| b.scale_err_ppm),
+                worst(|b| b.bias_dps)
+            );
+            for b in &self.scale {
+                let _ = writeln!(
+                    s,
+                    "| {:.1} | {} / {} | {:+.0} | {:+.3} |",
+                    b.temp_c, b.samples.0, b.samples.1, b.scale_err_ppm, b.bias_dps
+                );
+            }
+        }
         s
     }
 
     /// `thermal.png`: the rate error, the pump's offset from twice the sense resonance and
-    /// the drift followed, against the die temperature.
+    /// the drift followed, against the die temperature; where the rate alternates, its
+    /// scale factor error and bias per 5 K.
     pub fn plot(&self, sc: &Scenario, trace: &[TraceRow], path: &Path) -> Result<()> {
         let rows: Vec<&TraceRow> = trace
             .iter()
@@ -405,7 +457,7 @@ impl ThermalReport {
             p
         };
         let (root, body) = figure(path, &format!("{}: through temperature", self.scenario))?;
-        let areas = grid(&body, 3, 1);
+        let areas = grid(&body, if self.scale.is_empty() { 3 } else { 5 }, 1);
         draw_panel(
             &areas[0],
             &panel(
@@ -435,6 +487,15 @@ impl ThermalReport {
             BLUE,
         );
         draw_panel(&areas[2], &p)?;
+        if let [_, _, _, a3, a4] = &areas[..] {
+            let sf = self.scale.iter().map(|b| (b.temp_c, b.scale_err_ppm));
+            draw_panel(
+                a3,
+                &panel("scale factor error (±Ω)", "ppm", sf.collect(), RED),
+            )?;
+            let bias = self.scale.iter().map(|b| (b.temp_c, b.bias_dps));
+            draw_panel(a4, &panel("bias (±Ω)", "°/s", bias.collect(), RED))?;
+        }
         root.present()?;
         Ok(())
     }

@@ -56,7 +56,7 @@ pub const HEALTH_NAMES: [&str; 8] = [
 ];
 
 /// One 500 Hz sample of a run.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct TraceRow {
     /// Time since the start of the run, s.
     pub t_s: f64,

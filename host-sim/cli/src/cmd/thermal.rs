@@ -33,6 +33,17 @@ pub struct Args {
     /// scenario's or the core's.
     #[arg(long, value_name = "KAPPA")]
     pub drift_kappa: Option<f64>,
+    /// Withhold the die temperature from the core (the scenario's `sensor = false`): the
+    /// drift followed by the walk alone.
+    #[arg(long)]
+    pub no_sensor: bool,
+    /// Stretch the profile's ramp to this many seconds (a profile of one ramp, such as
+    /// the default warm-up's 20 s), the run ending 2 s after it.
+    #[arg(long, value_name = "S")]
+    pub ramp_s: Option<f64>,
+    /// The ramp's rise instead of the profile's, K (a profile of one ramp).
+    #[arg(long, value_name = "K")]
+    pub rise_k: Option<f64>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -58,6 +69,15 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
             });
         }
         sc.estimator.drift_kappa = Some(k);
+    }
+    if let (true, Some(t)) = (a.no_sensor, sc.temperature.as_mut()) {
+        t.sensor = false;
+    }
+    if a.ramp_s.is_some() || a.rise_k.is_some() {
+        reshape_ramp(&mut sc, a.ramp_s, a.rise_k).map_err(|error| Failure {
+            code: EXIT_LOAD,
+            error,
+        })?;
     }
     if sc.temperature.is_none() {
         return Err(Failure {
@@ -104,4 +124,59 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     ));
     text.push_str(&file_list(&files));
     ctx.say(&text)
+}
+
+/// The profile's one ramp (points: held, ramp start, ramp end) stretched to `ramp_s` and
+/// `rise_k`; the run ends 2 s after it.
+fn reshape_ramp(sc: &mut Scenario, ramp_s: Option<f64>, rise_k: Option<f64>) -> anyhow::Result<()> {
+    let Some(t) = sc.temperature.as_mut() else {
+        anyhow::bail!("scenario '{}' has no [temperature] profile", sc.name);
+    };
+    let moves = t.points.windows(2).filter(|w| w[1][1] != w[0][1]).count();
+    let Some(&[t0, c0]) = t.points.iter().rev().nth(1) else {
+        anyhow::bail!("--ramp-s/--rise-k need a profile of one ramp");
+    };
+    if moves != 1 || t.points.last().is_none_or(|l| l[1] == c0) {
+        anyhow::bail!(
+            "--ramp-s/--rise-k need a profile of one ramp ending at its last point (scenario '{}' has {moves} moves)",
+            sc.name
+        );
+    }
+    let last = t.points.last().copied().unwrap_or([t0, c0]);
+    let dur = ramp_s.unwrap_or(last[0] - t0);
+    let rise = rise_k.unwrap_or(last[1] - c0);
+    if !(dur.is_finite() && dur > 0.0 && rise.is_finite() && rise.abs() <= 200.0) {
+        anyhow::bail!("--ramp-s must be > 0 and --rise-k within ±200 K (got {dur} s, {rise} K)");
+    }
+    if let Some(l) = t.points.last_mut() {
+        *l = [t0 + dur, c0 + rise];
+    }
+    sc.duration_s = t0 + dur + 2.0;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_warm_up_ramp_is_stretched_and_other_profiles_are_refused() {
+        let warm = || Scenario::from_toml_str(WARM_UP, "warm-up.toml").unwrap();
+        let mut sc = warm();
+        reshape_ramp(&mut sc, Some(300.0), Some(2.0)).unwrap();
+        let t = sc.temperature.as_ref().unwrap();
+        assert_eq!(t.points.last(), Some(&[305.0, 27.0]));
+        assert_eq!(sc.duration_s, 307.0);
+        let mut sc = warm();
+        reshape_ramp(&mut sc, Some(40.0), None).unwrap();
+        assert_eq!(
+            sc.temperature.as_ref().unwrap().points.last(),
+            Some(&[45.0, 35.0])
+        );
+        // a cycle is not one ramp; a zero duration is not a ramp
+        let mut sc = warm();
+        sc.temperature.as_mut().unwrap().points.push([40.0, 25.0]);
+        assert!(reshape_ramp(&mut sc, Some(300.0), None).is_err());
+        assert!(reshape_ramp(&mut warm(), Some(0.0), None).is_err());
+    }
 }
