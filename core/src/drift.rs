@@ -116,6 +116,8 @@ pub struct DriftTracker<T> {
     /// without one) and that prediction's variance: the walk and the lead add them.
     known: [T; 2],
     known_var: [T; 2],
+    /// Twice `known` (each axis is moved every other sample).
+    known2: [T; 2],
 }
 
 impl<T: Real> DriftTracker<T> {
@@ -189,7 +191,15 @@ impl<T: Real> DriftTracker<T> {
     /// Sets the predicted drift per update and its variance, both axes (module
     /// [`crate::thermal`]).
     pub fn set_known(&mut self, v: [T; 2], var: [T; 2]) {
+        let two = T::from_f64(2.0);
         (self.known, self.known_var) = (v, var);
+        self.known2 = [two * v[0], two * v[1]];
+    }
+
+    /// Twice the predicted drift per update of axis `axis` (it moves every other sample).
+    #[inline(always)]
+    pub fn known2(&self, axis: usize) -> T {
+        self.known2.get(axis).copied().unwrap_or(T::ZERO)
     }
 
     /// The walk's variance for axis `axis` (per fourth update), scaled units: the measured
@@ -207,6 +217,7 @@ impl<T: Real> DriftTracker<T> {
         *self = DriftTracker {
             known: self.known,
             known_var: self.known_var,
+            known2: self.known2,
             ..DriftTracker::default()
         };
     }

@@ -722,6 +722,15 @@ impl<T: Real, const N: usize> Rls<T, N> {
         }
     }
 
+    /// Moves one parameter of the estimate by `delta`, a finite value the caller computed
+    /// (a known input's time update; no check, the tick path); `j ≥ N` changes nothing.
+    #[inline(always)]
+    pub fn nudge(&mut self, j: usize, delta: T) {
+        if let Some(x) = self.x.get_mut(j) {
+            *x += delta;
+        }
+    }
+
     /// Replaces the estimate (e.g. after re-centring the nominal θ); the covariance is
     /// kept. Returns `false` and changes nothing if any entry is NaN or ±∞.
     pub fn set_estimate(&mut self, x: [T; N]) -> bool {

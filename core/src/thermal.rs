@@ -6,10 +6,10 @@
 //! (module [`crate::drift`]): it is the learned coefficient times the temperature's rate.
 //! Per block of [`ThermalDesign::every`] samples (0.1 s):
 //!
-//! * **The temperature and its rate.** The block's mean temperature goes through Brown's
-//!   double exponential smoothing (time constant `rls.tcf_tau_s`, 2 s): a level without
-//!   lag on a ramp and the ramp's rate. The ADXL355's sensor (0.11 K a code) is noisy per
-//!   sample; the block mean and the smoothing bring the rate's noise to ≈ 1e-4 K/s.
+//! * **The temperature and its rate.** The block's mean temperature goes through Brown's double
+//!   exponential smoothing (time constant `rls.tcf_tau_s`, 2 s): a level without lag on a
+//!   ramp and the ramp's rate (which lags a ramp's start or end by about τ: the walk
+//!   covers that, below). The block's mean is the temperature reported and recorded.
 //! * **The coefficient.** For each drift column (θ12 on the drive, θ22 on the sense, in
 //!   the RLS's scaled units, `z` = the estimate advanced over the row filter's delay)
 //!   a two-state Kalman filter fits `z = a + b·(T − T_ref)`: the intercept `a` walks
@@ -23,7 +23,7 @@
 //!   reset (the same rule as the measured drift).
 //! * **The prediction.** Once a slope stands four of its standard deviations out of zero
 //!   it is learned: the drift column moves by `b·Ṫ` per update (a Kalman filter's time
-//!   update with a known input, [`crate::rls::Rls::shift`]), the lead over the row
+//!   update with a known input, [`crate::rls::Rls::nudge`]), the lead over the row
 //!   filter's delay includes it, and the walk takes the prediction's own uncertainty
 //!   `σ_b²·Ṫ²` on top of what is still measured. With the slope right, the corrections
 //!   the rows make carry no drift, the measured drift is zero, and the slow RLS keeps its
@@ -47,14 +47,18 @@ pub const LEARNED_SIGMAS: f64 = 4.0;
 /// The temperature span a slope must have been fitted over to count as learned, K: the
 /// estimate's wander over a sensor's noise (0.01 K a block) is not a slope.
 pub const LEARNED_SPAN_K: f64 = 2.0;
-/// A block temperature further than this many (squared) standard deviations from the
-/// smoothing's forecast is a change of the rate (a ramp's start or end): the smoothing
-/// restarts there.
-pub const MANOEUVRE_Z2: f64 = 25.0;
 /// The predicted drift's relative error beyond the slope's own uncertainty (the
 /// temperature's rate, the sensor's lag behind the resonator's die): the walk takes
 /// its square on top.
 pub const PREDICTED_REL_ERR: f64 = 1.0;
+/// Blocks of the temperature noise's running mean before it is an EWMA.
+pub const VAR_T_BLOCKS: u32 = 20;
+/// The floor of the temperature noise's variance, K²: a code of the ADXL355 (0.11 K)
+/// squared over 12 (a quantised, otherwise noiseless reading is not exact).
+pub const VAR_T_MIN: f64 = 0.0011;
+/// Below this temperature rate, K/s, the die is steady: the fits' residuals then measure
+/// the estimate's own wander (while it moves they carry a slope still being learned).
+pub const STEADY_K_S: f64 = 0.01;
 /// Consecutive outlier blocks after which a fit restarts from the slope's prior.
 pub const REFUSED_MAX: u32 = 20;
 /// Prior standard deviation of a slope, scaled units per K (θ12, θ22 relative to their
@@ -74,6 +78,8 @@ pub struct ThermalDesign<T> {
     pub per_update: T,
     /// The intercept's walk per block, as a fraction of a block's variance.
     pub q_a: T,
+    /// [`STEADY_K_S`] per block.
+    pub steady_per_block: T,
 }
 
 impl<T: Real> ThermalDesign<T> {
@@ -97,6 +103,7 @@ impl<T: Real> ThermalDesign<T> {
             per_update: T::from_f64(1.0 / every),
             // the intercept's own memory ≈ 600 blocks (a minute): √(R/q)
             q_a: T::from_f64(1.0 / (600.0 * 600.0)),
+            steady_per_block: T::from_f64(STEADY_K_S * block_s),
         }
     }
 
@@ -154,7 +161,14 @@ impl<T: Real> SlopeFit<T> {
     /// constant temperature teaches no slope). Returns false (nothing changed) for a
     /// residual beyond 10 σ; [`REFUSED_MAX`] refusals in a row restart the fit from the
     /// slope's prior (a fit that refuses everything has stopped learning).
-    pub fn take(&mut self, d: &ThermalDesign<T>, z: T, dt: T, p_z: T, var_t: T) -> bool {
+    pub fn take(
+        &mut self,
+        d: &ThermalDesign<T>,
+        z: T,
+        dt: T,
+        p_z: T,
+        (var_t, steady): (T, bool),
+    ) -> bool {
         let [paa, pab, pbb] = self.p;
         let own = if self.r2 > p_z { self.r2 } else { p_z };
         let r_var = d.n_corr * own + (self.b * self.b + pbb) * var_t;
@@ -201,9 +215,12 @@ impl<T: Real> SlopeFit<T> {
             a10 * i10 + a11 * i11 + k1 * k1 * r_var,
         ];
         self.span = [self.span[0].min(dt), self.span[1].max(dt)];
-        // the residuals' mean square after the update, an EWMA over 20 blocks
-        let post = z - self.a - self.b * dt;
-        self.r2 += T::from_f64(0.05) * (post * post - self.r2);
+        // the residuals' mean square after the update while the die is steady, an EWMA
+        // over 20 blocks
+        if steady {
+            let post = z - self.a - self.b * dt;
+            self.r2 += T::from_f64(0.05) * (post * post - self.r2);
+        }
         true
     }
 }
@@ -211,7 +228,7 @@ impl<T: Real> SlopeFit<T> {
 /// The learner's state (module docs).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ThermalState<T> {
-    /// Sum and count of this block's temperatures.
+    /// Sum and count of this block's plausible temperatures.
     sum: T,
     n: u32,
     /// Samples left in this block.
@@ -222,11 +239,12 @@ pub struct ThermalState<T> {
     started: bool,
     /// The smoothed temperature's rate, K per update (0 without a temperature).
     pub rate: T,
-    /// The smoothed temperature, °C, at the last block (`None`: that block had none).
+    /// The last block's mean temperature, °C (`None`: that block had none).
     pub level: Option<T>,
     /// The block temperature's noise variance, K² (the mean square of its one-block
-    /// forecast's error, an EWMA over 20 blocks).
+    /// forecast's error, an EWMA over [`VAR_T_BLOCKS`] blocks) and the blocks it has seen.
     pub var_t: T,
+    var_n: u32,
     /// The temperature the fits refer to (`None` before the first taken block).
     pub t_ref: Option<T>,
     /// The fits of θ12 (drive) and θ22 (sense).
@@ -234,35 +252,38 @@ pub struct ThermalState<T> {
     /// The learner's frame: θ_col = θ_col at the frame's origin + sc·(off + x); the
     /// re-linearisations move `x` by `-dx` and `off` by `+dx`.
     pub off: [T; 2],
-    /// The sample each column was last advanced by the prediction.
-    pub last_shift: [u32; 2],
 }
 
 impl<T: Real> ThermalState<T> {
-    /// Takes one sample's temperature; true at the end of a block (then call
-    /// [`Self::block`]). A `None`, non-finite or implausible temperature is not taken.
+    /// Counts one sample, every eighth's temperature into the block's mean (six a block:
+    /// the die moves millikelvins in 0.1 s, the board's reading is refreshed at 10 Hz, and
+    /// the tick's cost is a countdown); true at the end of a block (then call
+    /// [`Self::block`]). A `None`, non-finite or implausible temperature is not taken (one
+    /// comparison: |T − centre| within the window's half width).
     #[inline(always)]
     pub fn push(&mut self, d: &ThermalDesign<T>, temp_c: Option<T>) -> bool {
-        if let Some(t) = temp_c
-            && t >= T::from_f64(TEMP_MIN_C)
-            && t <= T::from_f64(TEMP_MAX_C)
+        if self.left & 7 == 0
+            && let Some(t) = temp_c
         {
-            self.sum += t;
-            self.n += 1;
+            let centre = T::from_f64(0.5 * (TEMP_MIN_C + TEMP_MAX_C));
+            // NaN fails the comparison
+            if (t - centre).abs() <= T::from_f64(0.5 * (TEMP_MAX_C - TEMP_MIN_C)) {
+                self.sum += t;
+                self.n += 1;
+            }
         }
         if self.left > 1 {
             self.left -= 1;
-            false
-        } else {
-            self.left = d.every;
-            d.every > 0
+            return false;
         }
+        self.left = d.every;
+        d.every > 0
     }
 
-    /// The block's end: the smoothed temperature and its rate; with `learn`, each column
-    /// takes `z` (its estimate in the learner's frame, advanced over the row filter's
-    /// delay) with variance `p_z`. Returns the smoothed temperature (`None` where the
-    /// block had none: then no rate, and nothing predicted).
+    /// The block's end: its mean temperature and the smoothed rate; with `learn`, each
+    /// column takes `z` (its estimate in the learner's frame, advanced over the row
+    /// filter's delay) with variance `p_z`. Returns the block's temperature (`None` where
+    /// it had none: then no rate, and nothing predicted).
     pub fn block(
         &mut self,
         d: &ThermalDesign<T>,
@@ -270,38 +291,40 @@ impl<T: Real> ThermalState<T> {
         p_z: [T; 2],
         learn: bool,
     ) -> Option<T> {
-        let n = core::mem::take(&mut self.n);
-        let sum = core::mem::take(&mut self.sum);
+        let (sum, n) = (core::mem::take(&mut self.sum), core::mem::take(&mut self.n));
         if n == 0 {
             self.rate = T::ZERO;
             self.level = None;
             return None;
         }
-        let tb = sum / T::ratio(u64::from(n), 1);
+        // the block's mean, referred to its end (where `z` is taken) with the rate so far
+        let lag = d.alpha / (T::ONE - d.alpha) * (self.s1 - self.s2) * T::from_f64(0.5);
+        let tb = sum / T::ratio(u64::from(n), 1) + lag;
         if self.started {
             // Brown's one-block forecast, and its error's mean square
             let e = tb
                 - (T::from_f64(2.0) * self.s1 - self.s2)
                 - d.alpha / (T::ONE - d.alpha) * (self.s1 - self.s2);
-            if e * e > T::from_f64(MANOEUVRE_Z2) * self.var_t && self.var_t > T::ZERO {
-                // the rate changed (a ramp started or stopped): the smoothing starts
-                // again from this block, its rate at 0 (a lagging rate would predict a
-                // drift that is over), the forecast error's mean square kept
-                (self.s1, self.s2) = (tb, tb);
-            } else {
-                self.var_t += T::from_f64(0.05) * (e * e - self.var_t);
-                self.s1 += d.alpha * (tb - self.s1);
-                self.s2 += d.alpha * (self.s1 - self.s2);
+            let (e2, var) = (e * e, self.var_t.max(T::from_f64(VAR_T_MIN)));
+            // the noise's mean square: a running mean over the first blocks, then an EWMA
+            // of the errors within 2σ (the lag at a ramp's start or end is not noise)
+            let settled = self.var_n >= VAR_T_BLOCKS;
+            self.var_n = self.var_n.saturating_add(1);
+            if !settled || e2 <= T::from_f64(4.0) * var {
+                let w = T::ONE / T::ratio(u64::from(self.var_n.min(VAR_T_BLOCKS)), 1);
+                self.var_t += w * (e2 - self.var_t);
             }
+            self.s1 += d.alpha * (tb - self.s1);
+            self.s2 += d.alpha * (self.s1 - self.s2);
         } else {
             (self.s1, self.s2, self.started) = (tb, tb, true);
         }
-        let level = T::from_f64(2.0) * self.s1 - self.s2;
         let per_block = d.alpha / (T::ONE - d.alpha) * (self.s1 - self.s2);
         self.rate = per_block * d.per_update;
-        self.level = Some(level);
-        // the block's mean stands half a block before its end, where `z` is taken
-        let tb = tb + T::from_f64(0.5) * per_block;
+        // Brown's level overshoots a ramp's end for a few τ: the temperature reported (and
+        // written into a warm-start record) is the block's own
+        self.level = Some(tb);
+        let steady = per_block.abs() < d.steady_per_block;
         if learn {
             match self.t_ref {
                 None => {
@@ -309,20 +332,20 @@ impl<T: Real> ThermalState<T> {
                     let p_b = T::from_f64(SLOPE_PRIOR * SLOPE_PRIOR);
                     self.fit = [SlopeFit::start(T::ZERO, p_b); 2];
                     for j in 0..2 {
-                        self.fit[j].take(d, z[j], T::ZERO, p_z[j], self.var_t);
+                        self.fit[j].take(d, z[j], T::ZERO, p_z[j], (self.var_t, steady));
                     }
                 }
                 Some(t0) => {
-                    // against the block's mean, not the smoothed level: that lags a ramp's
-                    // start by about τ, and the block mean's noise (≈ 0.01 K) is small
-                    // against any span the slope is learned from
+                    // against the reading, not the smoothed level: that lags a ramp's start
+                    // by about τ, and a reading's noise (≈ 0.06 K) is small against any
+                    // span the slope is learned from (its variance is in the block's)
                     for j in 0..2 {
-                        self.fit[j].take(d, z[j], tb - t0, p_z[j], self.var_t);
+                        self.fit[j].take(d, z[j], tb - t0, p_z[j], (self.var_t, steady));
                     }
                 }
             }
         }
-        Some(level)
+        Some(tb)
     }
 
     /// The predicted drift of column `axis` per update and its variance (0 until the
@@ -391,19 +414,6 @@ impl<T: Real> ThermalState<T> {
     pub fn rebase(&mut self, dx: [T; 2]) {
         self.off[0] += dx[0];
         self.off[1] += dx[1];
-    }
-
-    /// The prediction's move of column `axis` since it was last advanced, at sample `k`
-    /// (at most 1 s of it: a longer gap is a restart, not a drift to catch up).
-    #[inline(always)]
-    pub fn advance(&mut self, axis: usize, k: u64, v: T) -> T {
-        let now = k as u32;
-        let Some(last) = self.last_shift.get_mut(axis) else {
-            return T::ZERO;
-        };
-        let gap = now.wrapping_sub(*last).min(500);
-        *last = now;
-        v * T::ratio(u64::from(gap), 1)
     }
 }
 
@@ -505,12 +515,19 @@ mod tests {
     fn implausible_temperatures_are_not_taken() {
         let d = design();
         let mut s = ThermalState::default();
-        for t in [f64::NAN, f64::INFINITY, -273.0, 400.0] {
-            s.push(&d, Some(t));
+        // every eighth sample is read
+        let feed = |s: &mut ThermalState<f64>, t: f64| {
+            for _ in 0..8 {
+                s.push(&d, Some(t));
+            }
+        };
+        for t in [f64::NAN, f64::INFINITY, -273.0, 400.0, -60.5, 150.5] {
+            feed(&mut s, t);
         }
         assert_eq!((s.n, s.sum), (0, 0.0));
-        s.push(&d, Some(30.0));
-        assert_eq!((s.n, s.sum), (1, 30.0));
+        feed(&mut s, -60.0);
+        feed(&mut s, 150.0);
+        assert_eq!((s.n, s.sum), (2, 90.0));
     }
 
     #[test]
@@ -519,10 +536,10 @@ mod tests {
         let mut f = SlopeFit::start(-6.6e-5, 1e-14);
         for k in 0..100 {
             let dt = k as f64 * 0.05;
-            assert!(f.take(&d, -6.6e-5 * dt, dt, 1e-14, 1e-4));
+            assert!(f.take(&d, -6.6e-5 * dt, dt, 1e-14, (1e-4, true)));
         }
         // a 3e-3 step: refused as an outlier until the reset, then taken by the intercept
-        assert!(!f.take(&d, 3e-3 - 6.6e-5 * 5.0, 5.0, 1e-14, 1e-4));
+        assert!(!f.take(&d, 3e-3 - 6.6e-5 * 5.0, 5.0, 1e-14, (1e-4, true)));
         let mut s = ThermalState {
             fit: [f; 2],
             t_ref: Some(0.0),
@@ -530,21 +547,12 @@ mod tests {
         };
         s.jumped(1);
         for _ in 0..50 {
-            assert!(s.fit[1].take(&d, 3e-3 - 6.6e-5 * 5.0, 5.0, 1e-14, 1e-4));
+            assert!(s.fit[1].take(&d, 3e-3 - 6.6e-5 * 5.0, 5.0, 1e-14, (1e-4, true)));
         }
         assert!((s.fit[1].a - 3e-3).abs() < 1e-9, "{}", s.fit[1].a);
         assert!((s.fit[1].b + 6.6e-5).abs() < 1e-9, "{}", s.fit[1].b);
         // the covariance stays positive definite throughout
         let [paa, pab, pbb] = s.fit[1].p;
         assert!(paa > 0.0 && pbb > 0.0 && pab * pab < paa * pbb);
-    }
-
-    #[test]
-    fn the_advance_is_the_gap_times_the_drift_and_at_most_a_second() {
-        let mut s = ThermalState::<f64>::default();
-        assert_eq!(s.advance(1, 4, 1e-8), 4e-8);
-        assert_eq!(s.advance(1, 8, 1e-8), 4e-8);
-        assert_eq!(s.advance(1, 100_000, 1e-8), 500e-8);
-        assert_eq!(s.advance(5, 8, 1e-8), 0.0);
     }
 }

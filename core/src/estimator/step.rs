@@ -46,6 +46,13 @@ impl<T: Real> State<T> {
         else {
             return self.hold_centre(d, events);
         };
+        // the drift the temperature predicts (module `thermal`; 0 without one): each axis
+        // every other sample by two samples' worth, updated or not (the device drifts on)
+        if k & 1 == 0 {
+            self.rls1.nudge(DRIFT_COL, self.drift.known2(0));
+        } else {
+            self.rls2.nudge(DRIFT_COL, self.drift.known2(1));
+        }
         let exc_var = self.known_signals(d, pump_hz, (good, sweep), pump_scale, acc);
         let excited = self.dithered && exc_var >= self.exc_var_min;
         // forget only while excited: once the dither has excited the regression, a
@@ -309,30 +316,19 @@ impl<T: Real> State<T> {
         }
     }
 
-    /// Stage 4b: the drift's prediction from the temperature (module `thermal`) and its
-    /// walk (module `drift`): one axis every other update, each axis every fourth with
-    /// four times the variance (the chip's tick budget; the drift is slow against 8 ms). Returns the drift columns' estimates before this sample's rows,
+    /// Stage 4b: the drift's walk (module `drift`): one axis every other update, each
+    /// axis every fourth with four times the variance (the chip's tick budget; the drift is
+    /// slow against 8 ms). Returns the drift columns' estimates before this sample's rows,
     /// whose corrections measure the drift.
     #[inline(always)]
     fn walk_drift(&mut self, f: &super::design::Fit<T>, k: u64) -> [T; 2] {
-        if k & 1 == 0 {
-            // the temperature's predicted drift since the axis' last turn (module
-            // `thermal`; 0 without a temperature), then the walk
-            let on = f.drift.enabled();
+        if f.drift.enabled() && k & 1 == 0 {
             if k & 2 == 0 {
-                let v = self.thermal.advance(0, k, self.drift.known(0));
-                self.rls1.shift(DRIFT_COL, v);
-                if on {
-                    self.rls1
-                        .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
-                }
+                self.rls1
+                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
             } else {
-                let v = self.thermal.advance(1, k, self.drift.known(1));
-                self.rls2.shift(DRIFT_COL, v);
-                if on {
-                    self.rls2
-                        .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
-                }
+                self.rls2
+                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
             }
         }
         [
