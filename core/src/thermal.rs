@@ -46,7 +46,7 @@ pub const TEMP_MAX_C: f64 = 150.0;
 pub const LEARNED_SIGMAS: f64 = 4.0;
 /// The temperature span a slope must have been fitted over to count as learned, K: the
 /// estimate's wander over a sensor's noise (0.01 K a block) is not a slope.
-pub const LEARNED_SPAN_K: f64 = 2.0;
+pub const LEARNED_SPAN_K: f64 = 1.0;
 /// The predicted drift's relative error beyond the slope's own uncertainty (the
 /// temperature's rate, the sensor's lag behind the resonator's die): the walk takes
 /// its square on top.
