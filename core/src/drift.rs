@@ -39,19 +39,14 @@
 //! its innovations cross the detector's threshold on the first samples, and it is reset and
 //! re-identified as before. A measured drift faster than `rls.drift_max_ppm_s` is a jump too
 //! (no walk, no lead: a fast ramp such as `drift-retune`'s 0.34 % in 0.5 s is left to the
-//! detector); a reset of an axis clears that axis' measured drift, which learns again from a
-//! settled estimate two windows after it (a re-identification's corrections are not a
-//! drift) and tells a drift again one window later; the other axis keeps its own and
-//! follows it meanwhile.
+//! detector); a reset clears the measured drift, which learns again from a settled estimate
+//! two windows after it (a re-identification's corrections are not a drift) and tells a
+//! drift again one window later.
 //!
 //! Limits: a device already drifting when the estimate first settles learns that drift as
 //! its wander (it is followed by the forgetting alone, and the detector may fire, until the
-//! drift changes); a drift within the wander is not told either: the drive's θ12 on a 10 K
-//! warm-up over 300 s (2 ppm/s) lags until its detector fires, about every 1.6 s
-//! (`paragyro-sim thermal --ramp-s 300 --no-sensor`; with the die temperature in the
-//! samples the drift is predicted instead, module [`crate::thermal`]); the drive's θ12 and
-//! the sense's θ22 are the only columns that walk (the damping's temperature coefficient
-//! is not tracked).
+//! drift changes); the drive's θ12 and the sense's θ22 are the only columns that walk (the
+//! damping's temperature coefficient is not tracked).
 
 use crate::real::Real;
 
@@ -115,11 +110,8 @@ pub struct DriftTracker<T> {
     /// times slower, started as a running mean): how far `mean` wanders without a drift,
     /// the dither's periodic corrections included, against which a drift must stand out.
     var: [T; 2],
-    /// Updates taken on each axis since its last clear (the running means' start),
-    /// saturating.
-    n: [u32; 2],
-    /// Each axis measures again from this update on (two windows after its reset).
-    quiet_until: [u64; 2],
+    /// Updates taken since the last clear (the running means' start), saturating.
+    n: u32,
     /// The drift per update the temperature predicts (module [`crate::thermal`]; 0
     /// without one) and that prediction's variance: the walk and the lead add them.
     known: [T; 2],
@@ -129,37 +121,32 @@ pub struct DriftTracker<T> {
 }
 
 impl<T: Real> DriftTracker<T> {
-    /// Takes update `k`'s correction of the drift column on each axis (scaled units).
-    /// `learn` false (not settled), or an axis within two windows of its own reset: a
-    /// re-identification, not a drift, and not taken (the measured drift is kept meanwhile,
-    /// and followed). A non-finite correction is not taken.
+    /// Takes one update's correction of the drift column on each axis (scaled units).
+    /// `learn` false (not settled, or within two windows of a reset): a re-identification,
+    /// not a drift, and not taken. A non-finite correction is not taken.
     #[inline(always)]
-    pub fn push(&mut self, d: &DriftDesign<T>, corr: [T; 2], learn: bool, k: u64) {
+    pub fn push(&mut self, d: &DriftDesign<T>, corr: [T; 2], learn: bool) {
         // NaN and ±∞ fail the comparisons
         let finite = corr[0].abs() < T::MAX && corr[1].abs() < T::MAX;
         if !(learn && finite) {
             return;
         }
+        self.n = self.n.saturating_add(1);
+        // the slow EWMA's weight, 1/n until it reaches its own (a running mean at first)
+        let a_n = T::ONE / T::from_f64(f64::from(self.n));
+        let a_slow = if a_n > d.alpha_slow {
+            a_n
+        } else {
+            d.alpha_slow
+        };
         let z2 = T::from_f64(9.0);
         for j in 0..2 {
-            if k < self.quiet_until[j] {
-                continue;
-            }
-            let n = self.n[j].saturating_add(1);
-            self.n[j] = n;
-            // the slow EWMA's weight, 1/n until it reaches its own (a running mean at first)
-            let a_n = T::ONE / T::ratio(u64::from(n), 1);
-            let a_slow = if a_n > d.alpha_slow {
-                a_n
-            } else {
-                d.alpha_slow
-            };
             let m = self.mean[j] + d.alpha * (corr[j] - self.mean[j]);
             self.mean[j] = m;
             // the wander is learned where the measured drift is within it (or while it is
             // first measured), not from a drift that stands out of it
             let m2 = m * m;
-            if n <= d.min_n || m2 <= z2 * self.var[j] {
+            if self.n <= d.min_n || m2 <= z2 * self.var[j] {
                 self.var[j] += a_slow * (m2 - self.var[j]);
             }
         }
@@ -176,8 +163,7 @@ impl<T: Real> DriftTracker<T> {
         };
         // faster than any temperature moves it: a jump, the change detector's (NaN fails)
         let within = u.abs() <= d.vmax;
-        let n = self.n.get(axis).copied().unwrap_or(0);
-        if !within || n < d.min_n {
+        if !within || self.n < d.min_n {
             return T::ZERO;
         }
         let excess2 = u * u - T::from_f64(9.0) * v;
@@ -225,25 +211,15 @@ impl<T: Real> DriftTracker<T> {
         d.kappa2 * (u * u + var)
     }
 
-    /// Forgets the measured drift of both axes (a reset of both at update `k`); the
-    /// temperature's prediction is kept (it is set again every block).
-    pub fn clear(&mut self, d: &DriftDesign<T>, k: u64) {
-        self.clear_axis(d, 0, k);
-        self.clear_axis(d, 1, k);
-    }
-
-    /// Forgets the measured drift of axis `axis` (its covariance reset at update `k`): it
-    /// measures again two windows later. The other axis keeps its own and follows it (a
-    /// reset of one axis is not a change of the other).
-    pub fn clear_axis(&mut self, d: &DriftDesign<T>, axis: usize, k: u64) {
-        if let (Some(m), Some(v), Some(n), Some(q)) = (
-            self.mean.get_mut(axis),
-            self.var.get_mut(axis),
-            self.n.get_mut(axis),
-            self.quiet_until.get_mut(axis),
-        ) {
-            (*m, *v, *n, *q) = (T::ZERO, T::ZERO, 0, k + d.quiet);
-        }
+    /// Forgets the measured drift (a covariance reset); the temperature's prediction is
+    /// kept (it is set again every block).
+    pub fn clear(&mut self) {
+        *self = DriftTracker {
+            known: self.known,
+            known_var: self.known_var,
+            known2: self.known2,
+            ..DriftTracker::default()
+        };
     }
 }
 
@@ -267,7 +243,7 @@ mod tests {
     fn wander(t: &mut DriftTracker<f64>, d: &DriftDesign<f64>, n: usize, drift: f64) {
         for k in 0..n {
             let c = if k % 2 == 0 { 1e-6 } else { -1e-6 };
-            t.push(d, [c + drift, c + drift], true, 0);
+            t.push(d, [c + drift, c + drift], true);
         }
     }
 
@@ -275,9 +251,9 @@ mod tests {
     fn a_drift_that_stands_out_of_the_learned_wander_is_measured() {
         let d = design();
         let mut t = DriftTracker::default();
-        t.push(&d, [1e-6, -2e-6], false, 0);
+        t.push(&d, [1e-6, -2e-6], false);
         // a re-identification's corrections: nothing measured
-        assert_eq!((t.drift(&d, 1), t.q(&d, 1), t.n), (0.0, 0.0, [0; 2]));
+        assert_eq!((t.drift(&d, 1), t.q(&d, 1), t.n), (0.0, 0.0, 0));
         wander(&mut t, &d, 2000, 0.0);
         assert_eq!(
             (t.drift(&d, 0), t.drift(&d, 1), t.q(&d, 1)),
@@ -292,28 +268,8 @@ mod tests {
         // and stops: the measured drift falls back within the wander
         wander(&mut t, &d, 2000, 0.0);
         assert_eq!(t.drift(&d, 1), 0.0);
-        t.clear(&d, 0);
-        assert_eq!((t.drift(&d, 1), t.q(&d, 1), t.n), (0.0, 0.0, [0; 2]));
-    }
-
-    #[test]
-    fn a_reset_of_one_axis_keeps_the_other_axis_drift() {
-        let d = design();
-        let mut t = DriftTracker::default();
-        wander(&mut t, &d, 2000, 0.0);
-        wander(&mut t, &d, 2000, 3e-7);
-        let sense = t.drift(&d, 1);
-        assert!(sense > 0.0 && t.drift(&d, 0) > 0.0);
-        // the drive resets at update 4000: its drift is forgotten, the sense's followed
-        t.clear_axis(&d, 0, 4000);
-        assert_eq!(t.drift(&d, 0), 0.0);
-        assert_eq!(t.drift(&d, 1), sense);
-        // the drive measures again two windows (1000 updates) later, the sense meanwhile
-        t.push(&d, [5e-7, 3e-7], true, 4500);
-        assert_eq!(t.n[0], 0);
-        assert!(t.n[1] > 4000);
-        t.push(&d, [5e-7, 3e-7], true, 5000);
-        assert_eq!(t.n[0], 1);
+        t.clear();
+        assert_eq!((t.drift(&d, 1), t.q(&d, 1), t.n), (0.0, 0.0, 0));
     }
 
     #[test]
@@ -325,7 +281,7 @@ mod tests {
         let mut seen = 0;
         for k in 0..20_000 {
             let c = 1e-6 * (core::f64::consts::TAU * 1.3 * k as f64 / 500.0).sin();
-            t.push(&d, [c, c], true, 0);
+            t.push(&d, [c, c], true);
             if k > 500 && t.drift(&d, 1) != 0.0 {
                 seen += 1;
             }
@@ -350,9 +306,9 @@ mod tests {
     fn a_non_finite_correction_changes_nothing() {
         let d = design();
         let mut t = DriftTracker::default();
-        t.push(&d, [1e-6, 1e-6], true, 0);
+        t.push(&d, [1e-6, 1e-6], true);
         let before = (t.drift(&d, 0), t.drift(&d, 1), t.q(&d, 0), t.q(&d, 1));
-        t.push(&d, [f64::NAN, f64::INFINITY], true, 0);
+        t.push(&d, [f64::NAN, f64::INFINITY], true);
         assert_eq!(
             before,
             (t.drift(&d, 0), t.drift(&d, 1), t.q(&d, 0), t.q(&d, 1))

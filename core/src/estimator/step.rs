@@ -262,27 +262,26 @@ impl<T: Real> State<T> {
                 self.rls1.estimate_at(DRIFT_COL) - b1,
                 self.rls2.estimate_at(DRIFT_COL) - b2,
             ];
-            // the drift is measured on a settled estimate, each axis two windows after its
-            // own reset
-            self.drift.push(&f.drift, corr, self.was_settled, k);
+            // the drift is measured on a settled estimate, two windows after a reset
+            let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
+            self.drift.push(&f.drift, corr, learn);
         }
         let p = f.p_reset;
         if self.det1.push(&f.change, k, sum1) {
             self.rls1.reset_covariance(p);
             self.thermal.jumped(0);
-            self.drift.clear_axis(&f.drift, 0, k);
             Counters::bump(&mut self.counters.resets_drive, 1);
             *events |= event::CHANGE_DRIVE;
         }
         if self.det2.push(&f.change, k, sum2) {
             self.rls2.reset_covariance(p);
             self.thermal.jumped(1);
-            self.drift.clear_axis(&f.drift, 1, k);
             Counters::bump(&mut self.counters.resets_sense, 1);
             *events |= event::CHANGE_SENSE;
         }
         if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
             self.last_reset = k;
+            self.drift.clear();
             self.warm_first = false;
             self.change_pending = true;
             self.settle.clear();
