@@ -58,7 +58,7 @@ pub const VAR_T_BLOCKS: u32 = 20;
 pub const VAR_T_MIN: f64 = 0.0011;
 /// Below this temperature rate, K/s, the die is steady: the fits' residuals then measure
 /// the estimate's own wander (while it moves they carry a slope still being learned).
-pub const STEADY_K_S: f64 = 0.01;
+pub const STEADY_K_S: f64 = 0.002;
 /// Consecutive outlier blocks after which a fit restarts from the slope's prior.
 pub const REFUSED_MAX: u32 = 20;
 /// Prior standard deviation of a slope, scaled units per K (θ12, θ22 relative to their
@@ -171,7 +171,11 @@ impl<T: Real> SlopeFit<T> {
     ) -> bool {
         let [paa, pab, pbb] = self.p;
         let own = if self.r2 > p_z { self.r2 } else { p_z };
-        let r_var = d.n_corr * own + (self.b * self.b + pbb) * var_t;
+        // the noisy temperature's share, (b² + the slope's prior variance)·var_t: with the
+        // slope's own P_bb instead it would shrink as P_bb does, and a fit at a nearly
+        // constant temperature would grow sure of a slope from the sensor's noise
+        let prior = T::from_f64(SLOPE_PRIOR * SLOPE_PRIOR);
+        let r_var = d.n_corr * own + (self.b * self.b + prior) * var_t;
         if self.fresh {
             // the intercept given the slope: a = z − b·dt (its covariance with b exact)
             self.a = z - self.b * dt;
@@ -182,7 +186,9 @@ impl<T: Real> SlopeFit<T> {
             }
             return true;
         }
-        let paa = paa + d.q_a * r_var;
+        // the intercept walks with the estimate's own variance (ageing), not with what the
+        // residuals or the temperature's noise add
+        let paa = paa + d.q_a * d.n_corr * p_z;
         let h0 = paa + dt * pab;
         let h1 = pab + dt * pbb;
         let s = h0 + dt * h1 + r_var;
