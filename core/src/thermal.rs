@@ -444,6 +444,11 @@ mod tests {
     /// A ramp of temperature (0.5 K/s from 25 °C after 2 s, sensor noise and 0.11 K
     /// codes) and a column that follows it at `slope` per K with a little noise.
     fn run(slope: f64, seconds: f64, temp: bool) -> ThermalState<f64> {
+        run_ramp(slope, seconds, temp, 0.5, 1e-14)
+    }
+
+    /// [`run`] at `k_per_s` with the estimate's variance `p_z`.
+    fn run_ramp(slope: f64, seconds: f64, temp: bool, k_per_s: f64, p_z: f64) -> ThermalState<f64> {
         let d = design();
         let mut s = ThermalState::default();
         let mut seed = 12345u64;
@@ -456,13 +461,13 @@ mod tests {
         let n = (seconds * 500.0) as usize;
         for k in 0..n {
             let t_s = k as f64 / 500.0;
-            let truth = 25.0 + 0.5 * (t_s - 2.0).max(0.0);
+            let truth = 25.0 + k_per_s * (t_s - 2.0).max(0.0);
             let read = libm::round((truth + 0.2 * noise()) * 9.05) / 9.05;
             if s.push(&d, temp.then_some(read)) {
                 // the estimate's wander (the dither's 1.3 Hz corrections) and its noise
                 let wander = 1e-6 * libm::sin(core::f64::consts::TAU * 1.3 * t_s);
                 let z = slope * (truth - 25.0) + wander + 2e-7 * noise();
-                s.block(&d, [z, -z], [1e-14, 1e-14], t_s > 0.5);
+                s.block(&d, [z, -z], [p_z, p_z], t_s > 0.5);
             }
         }
         s
@@ -487,6 +492,18 @@ mod tests {
             // its uncertainty: the slope's (small by now) and PREDICTED_REL_ERR of it
             let floor = PREDICTED_REL_ERR * v.abs();
             assert!(var.sqrt() >= floor && var.sqrt() < 1.01 * floor, "{var:e}");
+        }
+    }
+
+    #[test]
+    fn a_slow_small_ramp_teaches_the_slope_of_a_precise_estimate() {
+        // 2 K over 300 s, the sense's precision (σ 1e-8 a sample): the sensor's noise in
+        // the first, nearly constant, seconds must not make the fit sure of a slope
+        let s = run_ramp(-6.6e-5, 302.0, true, 2.0 / 300.0, 1e-16);
+        for (j, sign) in [(0, 1.0), (1, -1.0)] {
+            let b = s.fit[j].b;
+            assert!(s.fit[j].learned(), "{j}");
+            assert!((b - sign * -6.6e-5).abs() < 0.03 * 6.6e-5, "{j}: {b}");
         }
     }
 

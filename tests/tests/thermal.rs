@@ -132,6 +132,22 @@ fn a_temperature_cycle_is_followed_with_the_die_temperature() {
 }
 
 #[test]
+fn a_2_k_warm_up_over_300_s_teaches_the_tcfs_without_resets() {
+    // the slowest case: 0.0067 K/s, ω_y² moving 0.44 ppm/s
+    let mut sc = warm_up();
+    let t = sc.temperature.as_mut().expect("a profile");
+    t.points = vec![[0.0, 25.0], [5.0, 25.0], [305.0, 27.0]];
+    sc.duration_s = 307.0;
+    let r = run_f32(&sc);
+    assert_eq!(resets_after(&r, 2.5), 0, "resets during the ramp");
+    let tcf = r.trace.last().expect("a trace").tcf_ppm_k;
+    assert!(
+        (tcf[0] + 30.0).abs() < 2.0 && (tcf[1] + 33.0).abs() < 2.0,
+        "learned TCFs {tcf:?} ppm/K (truth −30, −33)"
+    );
+}
+
+#[test]
 fn a_warm_start_at_another_temperature_starts_at_its_2_f_y() {
     // a record written at the end of the warm-up (35 °C), the coefficients learned
     let sc = warm_up();
