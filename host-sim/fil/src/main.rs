@@ -22,7 +22,8 @@ enum Pump {
 #[derive(Parser, Debug)]
 #[command(name = "paragyro-fil")]
 struct Cli {
-    /// The loop scenario: drift-retune, startup, rate-step, rate-ramp, spi-faults, out-of-band.
+    /// The loop scenario: drift-retune, startup, rate-step, rate-ramp, spi-faults, out-of-band,
+    /// warm-up.
     #[arg(default_value = "drift-retune")]
     scenario: String,
     /// Output directory (summary.json, logs, pipes).

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::chips::Faults;
 use crate::session::{BoardPump, Session};
-use crate::{LoopScenario, RampLeg};
+use crate::{LoopScenario, RampLeg, WarmUp};
 
 /// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
 /// (the replay's rule, `paragyro_firmware::run::WY2_TOL_OF_DRIFT`).
@@ -68,6 +68,10 @@ pub struct LoopNumbers {
     /// The fast rate's error over the last [`ERR_SPAN_S`] (see [`RateError`]).
     #[serde(default)]
     pub rate_error: Option<RateError>,
+    /// A warm-up's figures (`warm-up`), with the rate's own validity flag and the learned
+    /// TCFs, which only this loop sees.
+    #[serde(default)]
+    pub warm_up: Option<WarmUpNumbers>,
     /// The fast rate of every sample, °/s (for `trace.csv`; not in `summary.json`).
     #[serde(skip)]
     pub rates: Vec<f64>,
@@ -180,6 +184,10 @@ pub struct Summary {
     /// `host_only.rate_error`).
     #[serde(default)]
     pub rate_error: Option<RateError>,
+    /// A warm-up's figures in the loop (`warm-up`; the host-only loop's in
+    /// `host_only.warm_up`).
+    #[serde(default)]
+    pub warm_up: Option<WarmUpNumbers>,
     /// The firmware's exit code (0: it ended the session cleanly).
     pub exit_code: Option<i32>,
     /// The host-only closed loop of the same scenario (f32 core, same configuration, the
@@ -250,6 +258,19 @@ pub fn host_only(
     host_only_on(sc, seed, pump, leg, WordGrid::of(words))
 }
 
+/// [`host_only`] of a loop scenario: its ramp leg, its words and, for a warm-up, its
+/// figures ([`WarmUpNumbers`]).
+pub fn host_only_of(ls: &LoopScenario, seed: u64, pump: BoardPump) -> anyhow::Result<LoopNumbers> {
+    host_only_warm(
+        &ls.scenario,
+        seed,
+        pump,
+        ls.ramp,
+        WordGrid::of(ls.host_words),
+        ls.warm_up,
+    )
+}
+
 /// [`host_only`] with the pump rounded to the words of `grid` (the board's, or a finer
 /// DDS's: `examples/dds_words.rs`).
 pub fn host_only_on(
@@ -258,6 +279,18 @@ pub fn host_only_on(
     pump: BoardPump,
     leg: Option<RampLeg>,
     grid: WordGrid,
+) -> anyhow::Result<LoopNumbers> {
+    host_only_warm(sc, seed, pump, leg, grid, None)
+}
+
+/// [`host_only_on`] with a warm-up's figures.
+fn host_only_warm(
+    sc: &Scenario,
+    seed: u64,
+    pump: BoardPump,
+    leg: Option<RampLeg>,
+    grid: WordGrid,
+    warm: Option<WarmUp>,
 ) -> anyhow::Result<LoopNumbers> {
     let mut sc = sc.clone();
     sc.sim.pump_profile = pump.sim_profile();
@@ -272,6 +305,8 @@ pub fn host_only_on(
     let mut health_end = 0;
     let mut wy2_true = f64::NAN;
     let mut rates = Vec::new();
+    let mut ticks = Vec::new();
+    let mut centre_end = f64::NAN;
     let mut words = BoardWords::on_grid(grid, pump);
     runner::closed_loop_hooked(
         &sc,
@@ -290,8 +325,27 @@ pub fn host_only_on(
             health_end = ls.out.health.bits();
             wy2_true = ls.plant.phys[4];
             rates.push((ls.t_s, ls.plant.rate_dps, ls.out.rate.rate_dps));
+            if warm.is_some() {
+                ticks.push(WarmUpTick {
+                    t_s: ls.t_s,
+                    events: ls.out.events,
+                    health: ls.out.health.bits(),
+                    rate_valid: Some(ls.out.rate.valid),
+                    rate_dps: ls.out.rate.rate_dps,
+                    rate_dps_true: ls.plant.rate_dps,
+                    pump_hz_next: ls.out.pump_hz_next,
+                    wy2_true: ls.plant.phys[4],
+                });
+                centre_end = ls.est.pump_centre_hz();
+            }
         },
     )?;
+    let warm_up = warm.map(|w| {
+        let mut n = WarmUpNumbers::of(&w, &sc, &ticks, est.counters().retunes);
+        n.pump_centre_core_hz = Some(centre_end);
+        n.tcf_learned_ppm_k = Some(est.thermal().tcf_ppm_k);
+        n
+    });
     let ramp = leg_fit(leg, rates.iter().copied())?;
     let wy2_est = est.wy2();
     Ok(LoopNumbers {
@@ -307,6 +361,7 @@ pub fn host_only_on(
         health_end,
         ramp,
         rate_error: RateError::of(&sc, &rates, None),
+        warm_up,
         rates: rates.iter().map(|r| r.2).collect(),
         drive_amps: damp.iter().map(|d| d.1).collect(),
     })
@@ -523,6 +578,252 @@ fn mean_last_s(sc: &Scenario, rows: impl Iterator<Item = (f64, f64)>) -> f64 {
     sum / f64::from(n)
 }
 
+/// A warm-up's pump centre is the core's pump command averaged over at most the last this
+/// long, s (five periods of the 5 Hz frequency dither, which runs to the end): over the
+/// whole dither periods at the end after the last retune ramp (health bit 7), where the
+/// centre holds and the dither averages out.
+pub const PUMP_MEAN_S: f64 = 1.0;
+
+/// `Health::bits` bit of `retuning` (a retune ramp moves the centre).
+pub const RETUNING_BIT: u32 = 1 << 7;
+
+/// One tick as a warm-up's figures read it, from the loop or the host-only loop.
+#[derive(Clone, Copy, Debug)]
+pub struct WarmUpTick {
+    /// Time, s.
+    pub t_s: f64,
+    /// The core's event bits (`paragyro_core::output::event`).
+    pub events: u8,
+    /// The core's health bits (`Health::bits`).
+    pub health: u32,
+    /// The rate's own validity flag (`RateOutput::valid`; `None`: not seen, the loop).
+    pub rate_valid: Option<bool>,
+    /// The fast rate and the true rate, °/s.
+    pub rate_dps: f64,
+    pub rate_dps_true: f64,
+    /// The core's pump command for the next sample (centre and dither), Hz.
+    pub pump_hz_next: f64,
+    /// True ω_y².
+    pub wy2_true: f64,
+}
+
+/// `Health::bits` of what the rate's validity needs from the health (`rate::assess`):
+/// inputs valid (bit 0), drive locked (bit 4), and no change pending (bit 3, clear).
+pub const RATE_HEALTH_BITS: (u32, u32) = (1 | DRIVE_LOCKED_BIT, 1 << 3);
+
+/// A warm-up's figures ([`crate::WarmUp`]), in the loop (`Summary::warm_up`) and in the
+/// host-only loop (`LoopNumbers::warm_up`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WarmUpNumbers {
+    /// The die temperature's ramp the shares are read over, s.
+    pub ramp_s: (f64, f64),
+    /// Covariance resets (the core's `CHANGE_DRIVE` and `CHANGE_SENSE` events, one a tick
+    /// each) before the end of the start-up.
+    pub resets_startup: u32,
+    /// Drive and sense covariance resets after the start-up.
+    pub resets_drive_after: u32,
+    pub resets_sense_after: u32,
+    /// Samples of the ramp.
+    pub ramp_samples: u32,
+    /// Share of the ramp's samples whose health allows a valid rate ([`RATE_HEALTH_BITS`]:
+    /// necessary, not sufficient; the loop's summary has no per-sample rate flag).
+    pub rate_health_share: f64,
+    /// Share of the ramp's samples with the rate flagged valid (`RateOutput::valid`; the
+    /// host-only loop only: the firmware's answer does not carry it).
+    pub rate_valid_share: Option<f64>,
+    /// The fast rate's error over the ramp, every sample: rms and largest, °/s.
+    pub rate_err_rms_ramp_dps: f64,
+    pub rate_err_max_ramp_dps: f64,
+    /// The pump centre at the end: the core's pump command averaged over whole dither
+    /// periods at the end, after the last retune ramp, at most [`PUMP_MEAN_S`], Hz (NaN:
+    /// not one whole period after it).
+    pub pump_centre_end_hz: f64,
+    /// Samples averaged for `pump_centre_end_hz`.
+    pub pump_centre_samples: u32,
+    /// The core's own centre after the last step, Hz (the host-only loop only).
+    pub pump_centre_core_hz: Option<f64>,
+    /// Twice the true sense resonance at the end, 2·f0·√ω_y², Hz.
+    pub pump_target_end_hz: f64,
+    /// `pump_centre_end_hz − pump_target_end_hz`, Hz.
+    pub pump_offset_end_hz: f64,
+    /// Twice the true sense resonance's move over the run, Hz (what the pump had to follow).
+    pub pump_target_move_hz: f64,
+    /// The largest |pump centre − 2·f_y| during the ramp, Hz: the centre the command's mean
+    /// over each whole dither period of the ramp (blocks with a retune ramp left out), 2·f_y
+    /// its mean over the block.
+    pub pump_offset_max_ramp_hz: f64,
+    /// Dither periods of the ramp read for `pump_offset_max_ramp_hz`.
+    pub pump_blocks_ramp: u32,
+    /// Retunes the core completed.
+    pub retunes: u32,
+    /// The frequency TCFs (drive, sense) the core learned, ppm/K (NaN: not learned; the
+    /// host-only loop only: the firmware does not report them).
+    pub tcf_learned_ppm_k: Option<[f64; 2]>,
+}
+
+impl WarmUpNumbers {
+    /// The figures of `ticks` (every tick of a run of `sc`) for the warm-up `w`.
+    pub fn of(w: &WarmUp, sc: &Scenario, ticks: &[WarmUpTick], retunes: u32) -> Self {
+        use paragyro_core::output::event::{CHANGE_DRIVE, CHANGE_SENSE};
+        let count = |bit: u8, after: bool| {
+            ticks
+                .iter()
+                .filter(|r| (r.t_s >= w.startup_s) == after && r.events & bit != 0)
+                .count() as u32
+        };
+        let ramp: Vec<&WarmUpTick> = ticks
+            .iter()
+            .filter(|r| r.t_s >= w.ramp_s.0 && r.t_s < w.ramp_s.1)
+            .collect();
+        let n = ramp.len().max(1) as f64;
+        let (need, clear) = RATE_HEALTH_BITS;
+        let healthy = ramp
+            .iter()
+            .filter(|r| r.health & need == need && r.health & clear == 0)
+            .count();
+        let valid = ramp
+            .iter()
+            .map(|r| r.rate_valid)
+            .collect::<Option<Vec<bool>>>()
+            .map(|v| v.iter().filter(|b| **b).count() as f64 / n);
+        let err: Vec<f64> = ramp.iter().map(|r| r.rate_dps - r.rate_dps_true).collect();
+        let rms = (err.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+        let max = err.iter().map(|e| e.abs()).fold(0.0, f64::max);
+        // the sample rate of the ticks (the core's, 500 Hz)
+        let fs = match ticks {
+            [a, b, ..] if b.t_s > a.t_s => 1.0 / (b.t_s - a.t_s),
+            _ => f64::NAN,
+        };
+        let period = if fs.is_finite() && sc.estimator.dither_freq_hz > 0.0 {
+            ((fs / sc.estimator.dither_freq_hz).round() as usize).max(1)
+        } else {
+            1
+        };
+        let held = ticks
+            .iter()
+            .rposition(|r| r.health & RETUNING_BIT != 0)
+            .map_or(ticks, |k| &ticks[k + 1..]);
+        let most = if fs.is_finite() {
+            (PUMP_MEAN_S * fs).round() as usize
+        } else {
+            0
+        };
+        let len = held.len().min(most) / period * period;
+        let last = &held[held.len() - len..];
+        let centre = if len == 0 {
+            f64::NAN
+        } else {
+            last.iter().map(|r| r.pump_hz_next).sum::<f64>() / len as f64
+        };
+        let target = |wy2: f64| 2.0 * sc.sim.f0_hz * wy2.sqrt();
+        let mut blocks = 0u32;
+        let mut offset_max: f64 = 0.0;
+        for b in ramp.chunks_exact(period) {
+            if b.iter().any(|r| r.health & RETUNING_BIT != 0) {
+                continue;
+            }
+            let mean = |f: &dyn Fn(&WarmUpTick) -> f64| {
+                b.iter().map(|r| f(r)).sum::<f64>() / b.len() as f64
+            };
+            let off = mean(&|r| r.pump_hz_next) - mean(&|r| target(r.wy2_true));
+            offset_max = offset_max.max(off.abs());
+            blocks += 1;
+        }
+        let (first, end) = (
+            ticks.first().map_or(f64::NAN, |r| target(r.wy2_true)),
+            ticks.last().map_or(f64::NAN, |r| target(r.wy2_true)),
+        );
+        WarmUpNumbers {
+            ramp_s: w.ramp_s,
+            resets_startup: count(CHANGE_DRIVE, false) + count(CHANGE_SENSE, false),
+            resets_drive_after: count(CHANGE_DRIVE, true),
+            resets_sense_after: count(CHANGE_SENSE, true),
+            ramp_samples: ramp.len() as u32,
+            rate_health_share: healthy as f64 / n,
+            rate_valid_share: valid,
+            rate_err_rms_ramp_dps: rms,
+            rate_err_max_ramp_dps: max,
+            pump_centre_end_hz: centre,
+            pump_centre_samples: len as u32,
+            pump_centre_core_hz: None,
+            pump_target_end_hz: end,
+            pump_offset_end_hz: centre - end,
+            pump_target_move_hz: end - first,
+            pump_offset_max_ramp_hz: if blocks > 0 { offset_max } else { f64::NAN },
+            pump_blocks_ramp: blocks,
+            retunes,
+            tcf_learned_ppm_k: None,
+        }
+    }
+}
+
+/// A warm-up's checks ([`crate::WarmUp`]): in the loop, no covariance reset after the
+/// start-up, the rate's health on the share of the ramp, the pump centre near twice the
+/// sense resonance at the end and through the ramp; in the host-only loop, no reset after
+/// the start-up and the rate's own flag on the share. Failures appended.
+fn warm_up_checks(
+    failures: &mut Vec<String>,
+    w: &WarmUp,
+    fil: &WarmUpNumbers,
+    host: Option<&WarmUpNumbers>,
+) {
+    let mut check = |ok: bool, what: String| {
+        if !ok {
+            failures.push(what);
+        }
+    };
+    let (d, s) = (fil.resets_drive_after, fil.resets_sense_after);
+    check(
+        d + s == 0,
+        format!(
+            "{d} drive and {s} sense covariance resets after the start-up ({} s)",
+            w.startup_s
+        ),
+    );
+    check(
+        fil.rate_health_share >= w.min_valid_share,
+        format!(
+            "the rate's health on {:.1} % of the ramp's samples (at least {:.1} %)",
+            100.0 * fil.rate_health_share,
+            100.0 * w.min_valid_share
+        ),
+    );
+    check(
+        fil.pump_offset_end_hz.abs() <= w.pump_tol_hz,
+        format!(
+            "pump centre {:.2} Hz at the end, {:+.2} Hz from twice the sense resonance (at most {})",
+            fil.pump_centre_end_hz, fil.pump_offset_end_hz, w.pump_tol_hz
+        ),
+    );
+    check(
+        fil.pump_offset_max_ramp_hz <= w.pump_tol_hz,
+        format!(
+            "pump centre up to {:.2} Hz from twice the sense resonance during the ramp (at most {})",
+            fil.pump_offset_max_ramp_hz, w.pump_tol_hz
+        ),
+    );
+    let Some(h) = host else {
+        failures.push("the host-only loop has no warm-up figures".into());
+        return;
+    };
+    check(
+        h.resets_drive_after + h.resets_sense_after == 0,
+        format!(
+            "host-only: {} drive and {} sense covariance resets after the start-up",
+            h.resets_drive_after, h.resets_sense_after
+        ),
+    );
+    let v = h.rate_valid_share.unwrap_or(f64::NAN);
+    check(
+        v >= w.min_valid_share,
+        format!(
+            "host-only: the rate valid on {:.1} % of the ramp's samples (at least {:.1} %)",
+            100.0 * v,
+            100.0 * w.min_valid_share
+        ),
+    );
+}
+
 /// What the scenario expects of the loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Expect {
@@ -613,6 +914,25 @@ pub fn summarize(
     );
     let ramp = ramp_checks(&mut failures, leg, s);
     let (dds_fault_ticks, adc_fault_ticks) = fault_checks(&mut failures, faults, s);
+    let warm_up = ls.warm_up.map(|w| {
+        let ticks: Vec<WarmUpTick> = s
+            .rows
+            .iter()
+            .map(|r| WarmUpTick {
+                t_s: r.t_s,
+                events: r.fw.events,
+                health: r.fw.health,
+                rate_valid: None,
+                rate_dps: r.fw.rate_dps,
+                rate_dps_true: r.rate_dps_true,
+                pump_hz_next: r.fw.pump_hz_next,
+                wy2_true: r.wy2_true,
+            })
+            .collect();
+        let n = WarmUpNumbers::of(&w, sc, &ticks, c[9]);
+        warm_up_checks(&mut failures, &w, &n, host.warm_up.as_ref());
+        n
+    });
     Summary {
         scenario: sc.name.clone(),
         seed,
@@ -653,6 +973,7 @@ pub fn summarize(
                 .collect::<Vec<_>>(),
             Some(&host.rates),
         ),
+        warm_up,
         exit_code: s.exit_code,
         host_only: host,
         wy2_fil_vs_host: vs_host,
@@ -991,6 +1312,82 @@ mod tests {
         assert!(w.sweep_hz.is_some());
         let off = BoardWords::new(words, BoardPump::Staircase);
         assert!(off.frequency_hz_per_word.is_none());
+    }
+
+    /// `warm-up` is the file's profile at 4 g: the ramp 5–25 s, ωy² falling 660 ppm.
+    #[test]
+    fn the_warm_up_is_the_files_profile_within_the_accelerometers_range() {
+        let ls = crate::by_name("warm-up").unwrap();
+        let w = ls.warm_up.unwrap();
+        assert_eq!((w.startup_s, w.ramp_s), (2.5, (5.0, 25.0)));
+        let sc = &ls.scenario;
+        assert_eq!(sc.duration_s, 27.0);
+        assert!(sc.plant.accel_x_mps2 < 8.0 * 9.806_65 && sc.plant.accel_y_mps2 < 8.0 * 9.806_65);
+        assert_eq!(sc.temp_c(25.0), Some(35.0));
+        let (w0, w1) = (sc.plant_at(0.0).phys[4], sc.plant_at(27.0).phys[4]);
+        assert!(((w1 / w0 - 1.0) * 1e6 + 659.9).abs() < 0.5, "{w0} → {w1}");
+    }
+
+    /// A warm-up's figures: resets counted by their events after the start-up only, the
+    /// health's share over the ramp only, the pump centre the dithered command's mean over
+    /// the last second.
+    #[test]
+    fn the_warm_up_figures_read_resets_health_and_the_pump_centre() {
+        use paragyro_core::output::event::{CHANGE_DRIVE, CHANGE_SENSE};
+        let ls = crate::warm_up().unwrap();
+        let (w, sc) = (ls.warm_up.unwrap(), &ls.scenario);
+        let wy2 = 1.0258;
+        let centre = 2.0 * sc.sim.f0_hz * f64::sqrt(wy2) + 0.7;
+        let ticks: Vec<WarmUpTick> = (0..=13_500u32)
+            .map(|k| {
+                let t = f64::from(k) / 500.0;
+                let mut events = 0;
+                let mut health = 1 | DRIVE_LOCKED_BIT;
+                match k {
+                    500 => events = CHANGE_SENSE,                  // 1 s: start-up
+                    5_000 => events = CHANGE_DRIVE,                // 10 s
+                    6_000 => events = CHANGE_DRIVE | CHANGE_SENSE, // 12 s
+                    5_001..=5_100 => health |= 1 << 3,             // 100 ramp samples pending
+                    12_600..=12_700 => health = 0,                 // after the ramp: not counted
+                    13_000..=13_260 => health |= RETUNING_BIT,     // the centre moves
+                    _ => {}
+                }
+                let dither = 21.6 * (2.0 * std::f64::consts::PI * 5.0 * t).sin();
+                // 1.5 Hz above the centre until a retune ramp over ticks 13 000–13 260
+                let centre = match k {
+                    ..13_000 => centre + 1.5,
+                    13_000..=13_260 => centre + 1.5 - 1.5 * f64::from(k - 13_000) / 260.0,
+                    _ => centre,
+                };
+                WarmUpTick {
+                    t_s: t,
+                    events,
+                    health,
+                    rate_valid: None,
+                    rate_dps: 150.0 + if k == 6_000 { 3.0 } else { 0.0 },
+                    rate_dps_true: 150.0,
+                    pump_hz_next: centre + dither,
+                    wy2_true: wy2,
+                }
+            })
+            .collect();
+        let n = WarmUpNumbers::of(&w, sc, &ticks, 2);
+        assert_eq!(n.resets_startup, 1);
+        assert_eq!((n.resets_drive_after, n.resets_sense_after), (2, 1));
+        assert_eq!(n.ramp_samples, 10_000);
+        assert!((n.rate_health_share - 0.99).abs() < 1e-12, "{n:?}");
+        assert_eq!(n.rate_valid_share, None);
+        assert_eq!(n.rate_err_max_ramp_dps, 3.0);
+        // two whole dither periods after the ramp (240 samples after it)
+        assert_eq!(n.pump_centre_samples, 200);
+        assert!((n.pump_offset_end_hz - 0.7).abs() < 1e-6, "{n:?}");
+        assert_eq!(n.pump_target_move_hz, 0.0);
+        // during the ramp: 0.7 + 1.5 Hz on each of its 100 dither periods
+        assert_eq!(n.pump_blocks_ramp, 100);
+        assert!((n.pump_offset_max_ramp_hz - 2.2).abs() < 1e-6, "{n:?}");
+        let mut failures = Vec::new();
+        warm_up_checks(&mut failures, &w, &n, Some(&n));
+        assert_eq!(failures.len(), 3, "{failures:?}"); // resets ×2, the host's flag
     }
 
     /// A run whose last 2 s hold a constant truth gives the error's mean and rms and the
