@@ -15,7 +15,7 @@ use crate::{LoopScenario, RampLeg, WarmUp};
 
 mod warm_up;
 use warm_up::warm_up_checks;
-pub use warm_up::{PUMP_MEAN_S, RETUNING_BIT, WarmUpNumbers, WarmUpTick};
+pub use warm_up::{PUMP_MEAN_S, RATE_HEALTH_BITS, RETUNING_BIT, WarmUpNumbers, WarmUpTick};
 
 /// |ω̂y² − ωy²| at the end must be at most this fraction of the drift |ωy²(end) − ωy²(start)|
 /// (the replay's rule, `paragyro_firmware::run::WY2_TOL_OF_DRIFT`).
