@@ -363,6 +363,14 @@ impl<T: Real> ThermalState<T> {
                 let eps = T::from_f64(PREDICTED_REL_ERR);
                 (v, f.p[2] * self.rate * self.rate + eps * eps * v * v)
             }
+            // not learned yet: nothing predicted, but a moving temperature moves the column
+            // by an unknown b·Ṫ, b within the slope's prior: the walk takes that variance
+            // (a warm-up's first ramp is followed from the temperature's first rate on)
+            // (once the smoothing has seen VAR_T_BLOCKS blocks: its first rates are noise)
+            _ if self.var_n >= VAR_T_BLOCKS => {
+                let prior = T::from_f64(SLOPE_PRIOR * SLOPE_PRIOR);
+                (T::ZERO, prior * self.rate * self.rate)
+            }
             _ => (T::ZERO, T::ZERO),
         }
     }
@@ -521,6 +529,30 @@ mod tests {
             }
         }
         assert!(!s.fit[0].learned() && !s.fit[1].learned());
+        // nothing predicted; the walk's share of the prior for a rate that is noise
+        // (within 0.01 K/s) stays below 1e-13 a sample: 0.05 ppm/s
+        let (v, var) = s.predicted(1);
+        assert_eq!(v, 0.0);
+        let bound = SLOPE_PRIOR * 0.01 / 500.0;
+        assert!(var <= bound * bound, "{var:e}");
+    }
+
+    #[test]
+    fn before_its_slope_is_learned_a_moving_temperature_opens_the_walk() {
+        // 1.3 s into a 0.5 K/s ramp (0.65 K: no slope yet; the smoothing has seen its 20
+        // blocks): nothing predicted, the walk at the prior's share of the rate
+        let s = run(-6.6e-5, 3.3, true);
+        assert!(!s.fit[1].learned());
+        let (v, var) = s.predicted(1);
+        assert_eq!(v, 0.0);
+        let want = SLOPE_PRIOR * s.rate;
+        assert!(s.rate > 0.05 / 500.0, "{}", s.rate * 500.0);
+        assert!(
+            (var.sqrt() - want.abs()).abs() < 1e-6 * want.abs(),
+            "{var:e}"
+        );
+        // without a temperature, nothing
+        let s = run(-6.6e-5, 3.3, false);
         assert_eq!(s.predicted(1), (0.0, 0.0));
     }
 

@@ -312,17 +312,12 @@ fn the_dds_words_are_what_the_firmware_path_adds_to_the_rate() {
 /// centre within 2.5 Hz of twice the sense resonance through the ramp and at the end (the
 /// verdict, `paragyro_fil::warm_up`).
 ///
-/// Ignored: the core does not hold it. Measured (`cargo run --release -p paragyro-fil --
-/// warm-up --seed N`, `summary.json` `warm_up`): the loop resets from 5.13 s on, 0.13 s
-/// into the ramp and before a TCF can be learned (a 1 K span), 53 drive and 112–114 sense
-/// resets on seeds 1, 2, 5, 6 (seed 3: 80 sense), the rate's health on 0.6 % of the ramp,
-/// the pump centre left up to 7.2 Hz behind until one retune at 25.8 s, and the tick over
-/// its budget (mean 12 725, max 15 030 instructions on seed 1). Its host-only loop fails
-/// alike on seeds 1, 2, 5 and holds on 3 and 6 (0 resets, the rate valid on 96.7 %, the
-/// pump within 1.95 Hz, TCFs −30.3/−33.0 ppm/K); `paragyro-sim thermal` on the file itself
-/// (10 g, linear pump) holds on seeds 1 and 5 and resets 164–167 times on 2, 3, 4, 6.
+/// Ignored: the core does not hold it yet. Measured (`cargo run --release -p paragyro-fil
+/// -- warm-up`, seed 1, `summary.json` `warm_up`): in the loop 1 drive and 2 sense resets
+/// after the start-up, the rate's health on 96.4 % of the ramp, the pump within 1.99 Hz of
+/// 2·f_y; its host-only loop 0 resets, the rate valid on 96.8 %, the pump within 1.95 Hz.
 #[test]
-#[ignore = "the core resets through the warm-up in the loop (53 + 114 resets on seed 1): see the doc comment"]
+#[ignore = "the core still resets in the loop's warm-up (1 + 2 resets on seed 1): see the doc comment"]
 fn a_warm_up_is_followed_without_resets_in_the_loop() {
     if skip() {
         return;
