@@ -18,16 +18,22 @@
 //!   ±2e-4 /K (≈ ±100 ppm/K in frequency). The estimate's errors are correlated over the
 //!   slow RLS's memory, so a block counts as `n_corr` times its variance (the memory in
 //!   blocks), and that variance is the larger of the RLS's own and the residuals' mean
-//!   square. A residual beyond 10 σ (a jump the detector has not yet reset) is not
-//!   taken. Blocks are taken only from a settled estimate two drift windows after a
-//!   reset (the same rule as the measured drift).
+//!   square (while the die is steady), plus (b² + the slope's prior variance) times the
+//!   block temperature's own (errors in variables: the sensor's noise at a constant
+//!   temperature teaches no slope). A residual beyond 10 σ (a jump the detector has not
+//!   yet reset) is not taken. Blocks are taken only from a settled estimate two drift
+//!   windows after a reset (the same rule as the measured drift).
 //! * **The prediction.** Once a slope stands four of its standard deviations out of zero
-//!   it is learned: the drift column moves by `b·Ṫ` per update (a Kalman filter's time
-//!   update with a known input, [`crate::rls::Rls::nudge`]), the lead over the row
-//!   filter's delay includes it, and the walk takes the prediction's own uncertainty
-//!   `σ_b²·Ṫ²` on top of what is still measured. With the slope right, the corrections
-//!   the rows make carry no drift, the measured drift is zero, and the slow RLS keeps its
-//!   whole memory through a ramp.
+//!   over a [`LEARNED_SPAN_K`] span it is learned: the drift column moves by `b·Ṫ` per
+//!   update (a Kalman filter's time update with a known input,
+//!   [`crate::rls::Rls::nudge`]), the lead over the row filter's delay includes it, and the
+//!   walk takes the prediction's uncertainty, `σ_b²·Ṫ²` and [`PREDICTED_REL_ERR`] of it, on
+//!   top of what is still measured. With the slope right, the corrections the rows make
+//!   carry no drift, the measured drift is zero, and the slow RLS keeps its whole memory
+//!   through a ramp. Before it is learned, nothing is predicted but the walk takes
+//!   `SLOPE_PRIOR²·Ṫ²`: a warm-up's first ramp is followed from the temperature's first
+//!   rate on, where the measured drift alone stands out too late (the change detector
+//!   fires 0.13 s into a 0.5 K/s ramp, and its resets cascade).
 //!
 //! Without a temperature (a `None` or non-finite sample, or a value outside
 //! [`TEMP_MIN_C`]…[`TEMP_MAX_C`]) nothing is predicted: the drift is followed by the
