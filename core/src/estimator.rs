@@ -240,12 +240,6 @@ impl<T: Real> Estimator<T> {
         self.state.thermal.record(sc)
     }
 
-    /// The temperature learner's fits of θ12 and θ22 (scaled units; module
-    /// [`crate::thermal`]).
-    pub fn thermal_fits(&self) -> [crate::thermal::SlopeFit<T>; 2] {
-        self.state.thermal.fit
-    }
-
     /// Samples processed.
     pub fn samples(&self) -> u64 {
         self.state.k
@@ -309,8 +303,7 @@ impl<T: Real> Estimator<T> {
     /// Estimated ω_y² (non-dimensional).
     pub fn wy2(&self) -> f64 {
         let (t1, t2) = self.theta();
-        let g = (t1[3] - t2[3]) / 4.0;
-        -t2[1] + g * g
+        crate::physics::wy2_from_theta(&t1, &t2)
     }
 
     // ---- diagnostics

@@ -397,13 +397,9 @@ impl<T: Real> Estimator<T> {
         let mut s = *snap;
         s.theta1[1] += snap.dtheta_dt[0] * dt;
         s.theta2[1] += snap.dtheta_dt[1] * dt;
-        let wy2 = |t1: &[f64; 8], t2: &[f64; 6]| {
-            let g = (t1[3] - t2[3]) / 4.0;
-            -t2[1] + g * g
-        };
         // the pump at twice the sense resonance there (where the retune would put it;
         // the stored centre may sit up to the retune's deadband off)
-        let wy2_t = wy2(&s.theta1, &s.theta2);
+        let wy2_t = crate::physics::wy2_from_theta(&s.theta1, &s.theta2);
         if wy2_t > 0.0 {
             s.pump_centre_hz = 2.0 * self.config().f0_hz * libm::sqrt(wy2_t);
         }

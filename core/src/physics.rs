@@ -231,6 +231,13 @@ pub fn theta_from_physical(p: &Physical) -> ([f64; 8], [f64; 6]) {
     (th1, th2)
 }
 
+/// ω_y² from θ1, θ2 (its three components: −θ22 + γ², γ = (θ14 − θ24)/4), without the
+/// rest of [`physical_from_theta`].
+pub fn wy2_from_theta(th1: &[f64; 8], th2: &[f64; 6]) -> f64 {
+    let g = (th1[3] - th2[3]) / 4.0;
+    -th2[1] + g * g
+}
+
 /// `(θ1, θ2)` in the eq. (25) order → physical parameters: the corrected Table 3
 /// (module docs; the paper's γ' sign and αx index errors are fixed).
 ///

@@ -84,7 +84,7 @@ pub struct Sample<T> {
     pub pump_scale: T,
     /// Die temperature at the sample instant, °C (the ADXL355's sensor on the board),
     /// `None` where there is no sensor. With it the core learns each mode's temperature
-    /// coefficient and predicts the drift from it (module `thermal`); without
+    /// coefficient and predicts the drift from it ([`crate::thermal`]); without
     /// it the drift is followed as a random walk alone. A non-finite value counts as
     /// absent.
     pub temp_c: Option<T>,

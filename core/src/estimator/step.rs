@@ -262,8 +262,7 @@ impl<T: Real> State<T> {
                 self.rls1.estimate_at(DRIFT_COL) - b1,
                 self.rls2.estimate_at(DRIFT_COL) - b2,
             ];
-            // the drift is measured on a settled estimate, two windows after a reset
-            let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
+            let learn = self.drift_learns(f, k);
             self.drift.push(&f.drift, corr, learn);
         }
         let p = f.p_reset;
@@ -337,6 +336,14 @@ impl<T: Real> State<T> {
         ]
     }
 
+    /// The drift (module `drift`) and the temperature coefficients (module `thermal`) are
+    /// learned on a settled estimate two drift windows after a reset: a
+    /// re-identification's corrections are neither.
+    #[inline(always)]
+    fn drift_learns(&self, f: &super::design::Fit<T>, k: u64) -> bool {
+        self.was_settled && k >= self.last_reset + f.drift.quiet
+    }
+
     /// Stage 5c, every 0.1 s: the temperature learner's block (module `thermal`): each
     /// drift column's estimate in the learner's frame, advanced over the row filter's
     /// delay, against the block's temperature; then the drift it predicts, for the walk
@@ -353,7 +360,7 @@ impl<T: Real> State<T> {
             self.rls1.variance_at(DRIFT_COL),
             self.rls2.variance_at(DRIFT_COL),
         ];
-        let learn = self.was_settled && k >= self.last_reset + f.drift.quiet;
+        let learn = self.drift_learns(f, k);
         self.thermal.block(&f.thermal, z, p_z, learn);
         let (v0, q0) = self.thermal.predicted(0);
         let (v1, q1) = self.thermal.predicted(1);

@@ -250,25 +250,11 @@ pub fn warm_up() -> anyhow::Result<LoopScenario> {
     let Some(tp) = &scenario.temperature else {
         anyhow::bail!("warm-up.toml has no [temperature]");
     };
-    let moves: Vec<f64> = tp
-        .points
-        .windows(2)
-        .filter(|w| w[1][1] != w[0][1])
-        .flat_map(|w| [w[0][0], w[1][0]])
-        .collect();
     let startup_s = 2.5;
-    let ramp_s = (
-        moves
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min)
-            .max(startup_s),
-        moves
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max)
-            .min(scenario.duration_s),
-    );
+    let Some((from, to)) = tp.moving_s() else {
+        anyhow::bail!("warm-up.toml: no temperature ramp");
+    };
+    let ramp_s = (from.max(startup_s), to.min(scenario.duration_s));
     anyhow::ensure!(ramp_s.0 < ramp_s.1, "warm-up.toml: no temperature ramp");
     Ok(LoopScenario {
         name: "warm-up".into(),

@@ -166,16 +166,7 @@ impl ThermalReport {
                 sc.name
             );
         };
-        let moves: Vec<f64> = tp
-            .points
-            .windows(2)
-            .filter(|w| w[1][1] != w[0][1])
-            .flat_map(|w| [w[0][0], w[1][0]])
-            .collect();
-        let (Some(&t0), Some(&t1)) = (
-            moves.iter().min_by(|a, b| a.total_cmp(b)),
-            moves.iter().max_by(|a, b| a.total_cmp(b)),
-        ) else {
+        let Some((t0, t1)) = tp.moving_s() else {
             bail!("scenario '{}': its die temperature never changes", sc.name);
         };
         let t0 = t0.max(STARTUP_S);

@@ -91,6 +91,18 @@ impl TemperatureSpec {
         p.last().map_or(self.reference_c, |l| l[1])
     }
 
+    /// When the profile moves: from the start of its first segment that changes the
+    /// temperature to the end of its last, s (`None`: it never changes).
+    pub fn moving_s(&self) -> Option<(f64, f64)> {
+        let mut moving = self
+            .points
+            .windows(2)
+            .filter(|w| w[1][1] != w[0][1])
+            .map(|w| (w[0][0], w[1][0]));
+        let first = moving.next()?;
+        Some(moving.fold(first, |(a, _), (_, b)| (a, b)))
+    }
+
     /// The die temperature's rate at `t_s`, K/s (the slope of the segment).
     pub fn rate_k_per_s(&self, t_s: f64) -> f64 {
         for w in self.points.windows(2) {
@@ -212,6 +224,16 @@ mod tests {
         t.apply(&mut p, 35.0);
         assert!((p.wx2 / wx2 - (1.0 - 300e-6) * (1.0 - 300e-6)).abs() < 1e-15);
         assert!((p.wy2 / wy2 - 1.0 + 660e-6).abs() < 2e-7);
+    }
+
+    #[test]
+    fn the_profile_moves_from_its_first_change_to_its_last() {
+        let mut t = warm_up();
+        assert_eq!(t.moving_s(), Some((5.0, 305.0)));
+        t.points.extend([[310.0, 35.0], [320.0, 30.0]]);
+        assert_eq!(t.moving_s(), Some((5.0, 320.0)));
+        t.points = vec![[0.0, 25.0], [10.0, 25.0]];
+        assert_eq!(t.moving_s(), None);
     }
 
     #[test]
