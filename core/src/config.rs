@@ -174,6 +174,12 @@ pub struct RateConfig {
     /// θ14), so that a moving rate neither biases the other slow θ nor fires the change
     /// detector (host-sim/docs/rate-channel.md). 0: the rate is a constant of the slow RLS.
     pub walk_dps: f64,
+    /// Memory of the rate's zero, s: the cross-damping μxy that the rate subtracts
+    /// (γ = −(θ24 + μxy)/2) is the slow RLS's μ̂xy averaged since its last reset (a mean
+    /// whose weight falls as 1/n down to 1/(this·fs_hz)), not its 2 s estimate: μxy does not
+    /// move with temperature, and the slow estimate's wander would be the rate's
+    /// low-frequency noise (`rate`). 0: the slow RLS's μ̂xy every sample.
+    pub zero_memory_s: f64,
 }
 
 /// The whole configuration.
@@ -294,6 +300,7 @@ const TABLE2_CONFIG: Config = Config {
         gate_s: 0.3,
         gate_dev_dps: 1.0,
         walk_dps: 0.3,
+        zero_memory_s: 600.0,
     },
 };
 
@@ -554,7 +561,8 @@ impl RateConfig {
         pos(self.gate_accel_dps2, "rate.gate_accel_dps2")?;
         nonneg(self.gate_s, "rate.gate_s")?;
         pos(self.gate_dev_dps, "rate.gate_dev_dps")?;
-        nonneg(self.walk_dps, "rate.walk_dps")
+        nonneg(self.walk_dps, "rate.walk_dps")?;
+        nonneg(self.zero_memory_s, "rate.zero_memory_s")
     }
 }
 

@@ -333,6 +333,7 @@ impl<T: Real> Estimator<T> {
         let p = |tr: f64, n: f64| T::from_f64((tr / n).max(WARM_P_MIN).min(p_max));
         st.rls1.reset_covariance(p(snap.traces[0], 8.0));
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
+        st.rate.restart_zero();
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
         let sc = [d.fit.sc1[DRIFT_COL].to_f64(), d.fit.sc2[DRIFT_COL].to_f64()];

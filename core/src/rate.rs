@@ -239,6 +239,9 @@ pub struct RateDesign<T> {
     inv_2om: T,
     /// ω_ref² (f64: the nominal constant ω_ref² + θ22n is formed in f64).
     om_ref2: f64,
+    /// The smallest weight of the rate's zero's mean, [`ZERO_EVERY`]/(`rate.zero_memory_s`·fs)
+    /// (1: none).
+    zero_alpha: T,
 }
 
 impl<T: Real> RateDesign<T> {
@@ -277,6 +280,11 @@ impl<T: Real> RateDesign<T> {
             min_amp2: lock * lock,
             inv_2om: T::from_f64(0.5) / T::from_f64(om_ref),
             om_ref2: om_ref * om_ref,
+            zero_alpha: T::from_f64(if cfg.rate.zero_memory_s > 0.0 {
+                (ZERO_EVERY as f64 / (cfg.rate.zero_memory_s * cfg.fs_hz)).min(1.0)
+            } else {
+                1.0
+            }),
         }
     }
 
@@ -317,7 +325,14 @@ struct NominalSlow<T> {
     c22: T,
     th23: T,
     th25: T,
+    /// The rate's zero: `mu_nom + zero_dev` ([`RateState::hold_zero`]).
     mu_xy: T,
+    /// μxy of the linearisation point.
+    mu_nom: T,
+    /// The zero's deviation from `mu_nom`, averaged.
+    zero_dev: T,
+    /// Settled updates in that mean since the last reset (0: it follows the slow RLS).
+    zero_n: T,
     th24: T,
     /// The θ_nom components it was formed from (bit patterns; `None`: not yet).
     stamp: Option<[u64; 6]>,
@@ -422,6 +437,10 @@ pub struct RateEstimate<T> {
 /// diagnosis clash).
 pub const DRIVE_STEADY2: f64 = 0.25;
 
+/// The rate's zero is updated on every this many samples (a power of two: the tick tests
+/// the sample counter's low bits); its memory is hundreds of seconds.
+pub const ZERO_EVERY: u32 = 8;
+
 /// The fast channel's state.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RateState<T> {
@@ -498,30 +517,68 @@ impl<T: Real> RateState<T> {
                 return;
             }
         }
+        let mu_nom = T::from_f64(-0.5 * (th1n[3] + th2n[3]));
+        // the held mean is a deviation from the nominal: it keeps its total
+        let zero_dev = if self.nom.stamp.is_some() {
+            self.nom.zero_dev + (self.nom.mu_nom - mu_nom)
+        } else {
+            T::ZERO
+        };
         self.nom = NominalSlow {
             th21: T::from_f64(th2n[0]),
             c22: T::from_f64(d.om_ref2 + th2n[1]),
             th23: T::from_f64(th2n[2]),
             th25: T::from_f64(th2n[4]),
-            mu_xy: T::from_f64(-0.5 * (th1n[3] + th2n[3])),
+            mu_xy: mu_nom + zero_dev,
+            mu_nom,
+            zero_dev,
+            zero_n: self.nom.zero_n,
             th24: T::from_f64(th2n[3]),
             stamp: Some(key),
         };
     }
 
     /// The slow θ the fast row needs: the nominal part plus the RLS deviations
-    /// `dev14`, `dev2[..]` (already multiplied by the column scales).
+    /// `dev14`, `dev2[..]` (already multiplied by the column scales); μxy is the rate's
+    /// held zero ([`RateState::hold_zero`]).
     #[inline(always)]
-    pub fn slow_theta(&self, dev14: T, dev2: &[T; 6]) -> SlowTheta<T> {
+    pub fn slow_theta(&self, dev2: &[T; 6]) -> SlowTheta<T> {
         let n = &self.nom;
         SlowTheta {
             th21: n.th21 + dev2[0],
             c22: n.c22 + dev2[1],
             th23: n.th23 + dev2[2],
             th25: n.th25 + dev2[4],
-            mu_xy: n.mu_xy - T::from_f64(0.5) * (dev14 + dev2[3]),
+            mu_xy: n.mu_xy,
             th24: n.th24 + dev2[3],
         }
+    }
+
+    /// The rate's zero, μxy, every [`ZERO_EVERY`] samples: the slow RLS's μ̂xy (from its
+    /// deviations `dev14`, `dev24`) averaged over the settled samples since its last reset,
+    /// with weight `1/n` down to `rate.zero_memory_s`'s. The cross-damping does not move
+    /// with temperature, and the slow RLS's 2 s memory would pass its estimation noise
+    /// (mostly the drive's θ14: a tenth of a °/s over 10 s) into the rate's low
+    /// frequencies. Until the first settled sample after a reset the zero follows the slow
+    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held.
+    #[inline(always)]
+    pub fn hold_zero(&mut self, d: &RateDesign<T>, dev14: T, dev24: T, settled: bool) {
+        let n = &mut self.nom;
+        let mu_dev = -T::from_f64(0.5) * (dev14 + dev24);
+        if settled {
+            n.zero_n += T::ONE;
+            let a = T::ONE / n.zero_n;
+            let a = if a > d.zero_alpha { a } else { d.zero_alpha };
+            n.zero_dev += a * (mu_dev - n.zero_dev);
+        } else if n.zero_n == T::ZERO {
+            n.zero_dev = mu_dev;
+        }
+        n.mu_xy = n.mu_nom + n.zero_dev;
+    }
+
+    /// A covariance reset: the rate's zero follows the slow RLS again until it settles.
+    pub fn restart_zero(&mut self) {
+        self.nom.zero_n = T::ZERO;
     }
 
     /// One sample: filters the row in both channels and solves it (when the drive is

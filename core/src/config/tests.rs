@@ -127,6 +127,9 @@ const FIELDS: &[(&str, Rule, Setter)] = &[
         c.retune.min_interval_s = v
     }),
     ("rate.walk_dps", Rule::NonNeg, |c, v| c.rate.walk_dps = v),
+    ("rate.zero_memory_s", Rule::NonNeg, |c, v| {
+        c.rate.zero_memory_s = v
+    }),
 ];
 
 /// A value that breaks `rule`: NaN, ±∞, or a finite value out of its range.

@@ -302,6 +302,7 @@ impl<T: Real> State<T> {
             self.det1.rearm(&d.fit.change);
             self.det2.rearm(&d.fit.change);
             self.last_reset = self.k;
+            self.rate.restart_zero();
             self.warm_first = false;
             self.change_pending = true;
             self.settle.clear();

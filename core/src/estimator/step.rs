@@ -21,6 +21,7 @@ use crate::lpf::ReplicaChannel;
 use crate::monitor::InputCheck;
 use crate::output::{StepOutput, event};
 use crate::rate::RateOutput;
+use crate::rate::ZERO_EVERY;
 use crate::real::Real;
 use crate::retune::{RetuneAction, RetuneInputs, drive_band};
 use crate::rows::{Envelopes, Known, NROWS, Projections};
@@ -211,7 +212,11 @@ impl<T: Real> State<T> {
         let dev14 = d.fit.sc1[3] * x1[3];
         let mut dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
         dev2[DRIFT_COL] += d.fit.sc2[DRIFT_COL] * self.drift.lead(&d.fit.drift, 1);
-        let th = self.rate.slow_theta(dev14, &dev2);
+        if (self.k as u32) & (ZERO_EVERY - 1) == 0 {
+            self.rate
+                .hold_zero(&d.rate, dev14, dev2[3], self.was_settled);
+        }
+        let th = self.rate.slow_theta(&dev2);
         // a gate is renewed while it lasts (the gate itself clears `settled`)
         let slow_ok = self.was_settled || self.rate.gates(self.k);
         self.rate.track(
@@ -280,6 +285,7 @@ impl<T: Real> State<T> {
         }
         if *events & (event::CHANGE_DRIVE | event::CHANGE_SENSE) != 0 {
             self.last_reset = k;
+            self.rate.restart_zero();
             self.drift.clear();
             self.warm_first = false;
             self.change_pending = true;

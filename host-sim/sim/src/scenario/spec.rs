@@ -370,6 +370,9 @@ pub struct EstimatorSpec {
     /// The slow RLS's rate random walk per sample, °/s (core `rate.walk_dps`); `None`:
     /// the core's default.
     pub rate_walk_dps: Option<f64>,
+    /// Memory of the rate's zero μ̂xy, s (core `rate.zero_memory_s`; 0: the slow RLS's
+    /// μ̂xy every sample); `None`: the core's default (600 s).
+    pub rate_zero_memory_s: Option<f64>,
     /// Drift tracking's κ (core `rls.drift_kappa`, module `drift`; 0 off); `None`: the
     /// core's default (3).
     pub drift_kappa: Option<f64>,
@@ -391,6 +394,7 @@ impl Default for EstimatorSpec {
             retune: true,
             retune_ramp_s: 0.5,
             rate_walk_dps: None,
+            rate_zero_memory_s: None,
             drift_kappa: None,
             nominal: NominalSpec::default(),
         }

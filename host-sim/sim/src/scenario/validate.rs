@@ -98,6 +98,9 @@ impl Scenario {
         if let Some(w) = est.rate_walk_dps {
             non_negative(w, path(&["estimator", "rate_walk_dps"]))?;
         }
+        if let Some(m) = est.rate_zero_memory_s {
+            non_negative(m, path(&["estimator", "rate_zero_memory_s"]))?;
+        }
         for (k, v) in est.nominal.entries() {
             finite(v, path(&["estimator", "nominal", k]))?;
         }
