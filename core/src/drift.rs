@@ -118,6 +118,8 @@ pub struct DriftTracker<T> {
     known_var: [T; 2],
     /// Twice `known` (each axis is moved every other sample).
     known2: [T; 2],
+    /// The sense's [`DriftTracker::lead`] as of its last [`DriftTracker::refresh_lead`].
+    lead_sense: T,
 }
 
 impl<T: Real> DriftTracker<T> {
@@ -180,6 +182,19 @@ impl<T: Real> DriftTracker<T> {
     #[inline(always)]
     pub fn lead(&self, d: &DriftDesign<T>, axis: usize) -> T {
         (self.drift(d, axis) + self.known(axis)) * d.lead
+    }
+
+    /// Takes the sense's lead now (every few samples: it moves with the 0.2 s drift
+    /// average and the temperature's rate, and computing it costs a square root).
+    #[inline(always)]
+    pub fn refresh_lead(&mut self, d: &DriftDesign<T>) {
+        self.lead_sense = self.lead(d, 1);
+    }
+
+    /// The sense's lead as of the last [`DriftTracker::refresh_lead`] (scaled units).
+    #[inline(always)]
+    pub fn lead_sense(&self) -> T {
+        self.lead_sense
     }
 
     /// The drift per update the temperature predicts for axis `axis` (0 without one).

@@ -434,12 +434,15 @@ pub struct RateEstimate<T> {
 /// scenario), so only a deep fall is caught: when the dithers push the drive out of its
 /// parametric band it rings down (`characterise`: |x1| to 0.2–1.3 µm), and the fast row,
 /// given the slow θ, then read 138–169 °/s at a true 150 (issue 10's note on the
-/// diagnosis clash).
+/// diagnosis clash). Where the 5 Hz and 1.3 Hz dithers' phases meet, the amplitude dips
+/// below half its mean for ≈ 40 ms at a time: the rate is flagged invalid there, on ≈ 3 %
+/// of the samples of `warm-up`'s device (host-sim/docs/benchmarks.md).
 pub const DRIVE_STEADY2: f64 = 0.25;
 
-/// The rate's zero is updated on every this many samples (a power of two: the tick tests
-/// the sample counter's low bits); its memory is hundreds of seconds.
-pub const ZERO_EVERY: u32 = 8;
+/// The rate's zero is updated once in this many samples (the estimator's decision
+/// interval: it takes a phase of it that no decision, no thermal block falls on, so the
+/// tick's largest cost does not grow); its memory is hundreds of seconds.
+pub const ZERO_EVERY: u32 = 25;
 
 /// The fast channel's state.
 #[derive(Clone, Copy, Debug, Default)]

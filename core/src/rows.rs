@@ -21,6 +21,18 @@
 //! deviation `ω² − ω_ref²`, and what is filtered is already small. `F1` and `F2` outputs are
 //! accurate by construction (see `svf`). The regressor columns `Φ` (multiplied only by
 //! the small δθ) are filtered as they are.
+//!
+//! **A drifting coefficient.** The filter does not commute with a coefficient that moves:
+//! for θ(t) = θ + θ′t, `H[θB] = θ(t − 2/w)·F0(B) + (2θ′/w²)·F1(B)` to first order
+//! (`H = w²/(s + w)²`, whose first moment is `H·2/(s + w)`). The first term is why a
+//! drift's estimate lags by the filter's group delay 2/w (the estimator reads it advanced,
+//! module `drift`); the second is a term proportional to the envelope's derivative that
+//! no column carries, so a warm-up's θ22′ otherwise leaks into θ21, θ23 and θ24 (and the
+//! rate). The sense's fundamental rows subtract it, `(2θ22′/w²)·F1(B1) = g·F1(B1)`, with
+//! θ22′ the drift the estimator tracks ([`RowBuilder::push_projected`]'s `g_sense`). The
+//! drive's θ12′ has the same term in the drive rows, and the DC and third-harmonic rows
+//! have theirs; they are left out for the tick's cost (the sense fundamental is the row
+//! the rate is read from, and its θ22 column the large one).
 
 use crate::complex::Cplx;
 use crate::harmonics::{AxisProj, SynthTables, project};
@@ -200,6 +212,9 @@ impl<T: Real> Projections<T> {
 pub struct RowDesign<T> {
     svf: SvfCoeffs<T>,
     tables: SynthTables<T>,
+    /// 1/w (τ): a column's move over the filter's delay 2/w, times this, is the
+    /// coefficient `2θ′/w²` of its `F1` (module docs, "A drifting coefficient").
+    pub inv_w: f64,
 }
 
 impl<T: Real> RowDesign<T> {
@@ -209,6 +224,7 @@ impl<T: Real> RowDesign<T> {
         RowDesign {
             svf: SvfCoeffs::new(w, ts),
             tables: SynthTables::new(),
+            inv_w: 1.0 / w,
         }
     }
 }
@@ -405,11 +421,12 @@ impl<T: Real> RowBuilder<T> {
         rows: &mut RowSet<T>,
     ) {
         let p = Projections::of(design, e);
-        self.push_projected(design, e, kn, &p, rows);
+        self.push_projected(design, e, kn, &p, T::ZERO, rows);
     }
 
     /// [`RowBuilder::push`] with the projections already made (the estimator's tick:
-    /// the fast rate channel needs the sense cube's fundamental too).
+    /// the fast rate channel needs the sense cube's fundamental too), and the sense's
+    /// drift term `g_sense` = 2θ22′/w² (module docs, "A drifting coefficient"; 0: none).
     #[inline(always)]
     pub fn push_projected(
         &mut self,
@@ -417,6 +434,7 @@ impl<T: Real> RowBuilder<T> {
         e: &Envelopes<T>,
         kn: &Known<T>,
         p: &Projections<T>,
+        g_sense: T,
         rows: &mut RowSet<T>,
     ) {
         let (px, py) = (p.x, p.y);
@@ -473,12 +491,16 @@ impl<T: Real> RowBuilder<T> {
             rows.sense_y[0] = y0.f2 - n.th2[0] * y0.f1 - n.th2[3] * x0.f1 + vy.f0;
         }
         // ---- harmonic rows (1, 2: k = 1; 3, 4: k = 3)
+        let mut b1_f1 = Cplx::ZERO;
         for hi in 0..2 {
             let kk = if hi == 0 { T::ONE } else { T::from_f64(3.0) };
             let f = &mut self.h[hi];
             let i = &hin[hi];
             let a = f.a.update(&c, i.a);
             let b = f.b.update(&c, i.b);
+            if hi == 0 {
+                b1_f1 = b.f1;
+            }
             let oma = f.oma.update(&c, i.oma);
             let omb = f.omb.update(&c, i.omb);
             let p15 = f.p15.update(&c, i.p15);
@@ -512,5 +534,8 @@ impl<T: Real> RowBuilder<T> {
             rows.sense_y[r] = zy.re;
             rows.sense_y[r + 1] = zy.im;
         }
+        // the drifting θ22's term in the sense fundamental (module docs)
+        rows.sense_y[1] -= g_sense * b1_f1.re;
+        rows.sense_y[2] -= g_sense * b1_f1.im;
     }
 }

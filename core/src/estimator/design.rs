@@ -8,7 +8,7 @@
 //! temporary exists on the chip's stack (firmware/README.md).
 
 use crate::config::{Config, PumpProfile};
-use crate::drift::DriftDesign;
+use crate::drift::{DRIFT_COL, DriftDesign};
 use crate::lpf::ReplicaCoeffs;
 use crate::monitor::{ChangeDesign, InputLimits, SettleDesign};
 use crate::physics::theta_from_physical;
@@ -177,6 +177,9 @@ pub(crate) struct Fit<T> {
     /// drive θ14 and sense θ24 in their scaled units).
     pub walk_cap1: T,
     pub walk_cap2: T,
+    /// The sense drift's row term per unit of its lead (scaled units): `sc2[θ22]/w`
+    /// (rows.rs, "A drifting coefficient").
+    pub drift_f1: T,
     /// The drift tracker (`rls.drift_kappa`, `rls.drift_window_s`).
     pub drift: DriftDesign<T>,
     /// The temperature learner (`rls.tcf_tau_s`).
@@ -212,6 +215,7 @@ impl<T: Real> Fit<T> {
             relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
             change: ChangeDesign::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
             walk2: T::ZERO,
+            drift_f1: T::ZERO,
             walk_cap1: T::ZERO,
             walk_cap2: T::ZERO,
             // the row filter (ζ = 1) delays by 2/w_f at DC
@@ -298,6 +302,7 @@ impl<T: Real> Design<T> {
         let c = T::from_f64(WALK_CAP_DPS) * two_per_dps;
         let (s1, s2) = (fit.sc1[3], fit.sc2[3]);
         fit.walk2 = (w / s2) * (w / s2);
+        fit.drift_f1 = fit.sc2[DRIFT_COL] * T::from_f64(rows.inv_w);
         fit.walk_cap1 = (c / s1) * (c / s1);
         fit.walk_cap2 = (c / s2) * (c / s2);
     }

@@ -22,6 +22,9 @@ use crate::monitor::InputCheck;
 use crate::output::{StepOutput, event};
 use crate::rate::RateOutput;
 use crate::rate::ZERO_EVERY;
+
+// the rate's zero is held on a phase of the decision interval
+const _: () = assert!(ZERO_EVERY as u64 == DECIDE_EVERY);
 use crate::real::Real;
 use crate::retune::{RetuneAction, RetuneInputs, drive_band};
 use crate::rows::{Envelopes, Known, NROWS, Projections};
@@ -62,9 +65,22 @@ impl<T: Real> State<T> {
         let hold = self.excited_once && !excited;
         self.excited_once |= excited;
         let proj = Projections::of(&d.rows, &env);
-        self.track_rate(d, &env, &proj);
-        self.rows
-            .push_projected(&d.rows, &env, &self.last_known, &proj, &mut self.last_rows);
+        // the phase of the decision interval: decisions on 0 (stage 6), the rate's zero and
+        // the drift's lead on phases no decision, no thermal block falls on (stage 3a)
+        // (of the index's low 32 bits: a 32-bit remainder is a multiply on the chip, a
+        // 64-bit one far more; the phase slips once in 2³² samples, 99 days)
+        let phase = (k as u32) % (DECIDE_EVERY as u32);
+        self.track_rate(d, &env, &proj, phase);
+        // the sense drift's own term in its rows (rows.rs, "A drifting coefficient")
+        let g_sense = d.fit.drift_f1 * self.drift.lead_sense();
+        self.rows.push_projected(
+            &d.rows,
+            &env,
+            &self.last_known,
+            &proj,
+            g_sense,
+            &mut self.last_rows,
+        );
         let gated = k < d.watch.gate_startup
             || k < self.jump_gate_until
             || k < self.bad_gate_until
@@ -81,7 +97,7 @@ impl<T: Real> State<T> {
         }
         let health = self.assess(d, good, gated, settled, excited, pump_scale);
         let drive_amp = env.a[0].abs();
-        let health = self.retune(d, k, health, wy2, drive_amp, &mut events);
+        let health = self.retune(d, (k, phase == 0), health, wy2, drive_amp, &mut events);
         self.health = health;
         self.rate.assess(
             &d.rate,
@@ -204,17 +220,21 @@ impl<T: Real> State<T> {
     /// update (module `rate`); its narrow copy gates the slow RLS while the rate moves
     /// and says when the slow RLS's rate walks (stage 4a).
     #[inline(always)]
-    fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>) {
+    fn track_rate(&mut self, d: &Design<T>, env: &Envelopes<T>, p: &Projections<T>, phase: u32) {
         self.rate
             .refresh_nominal(&d.rate, &self.lin.th1n, &self.lin.th2n);
         let x1 = self.rls1.estimate();
         let x2 = self.rls2.estimate();
         let dev14 = d.fit.sc1[3] * x1[3];
         let mut dev2: [T; 6] = core::array::from_fn(|j| d.fit.sc2[j] * x2[j]);
-        dev2[DRIFT_COL] += d.fit.sc2[DRIFT_COL] * self.drift.lead(&d.fit.drift, 1);
-        if (self.k as u32) & (ZERO_EVERY - 1) == 0 {
+        dev2[DRIFT_COL] += d.fit.sc2[DRIFT_COL] * self.drift.lead_sense();
+        // once per decision interval each, on phases that no decision, no thermal block
+        // (every 50 samples, from 0) falls on: the tick's largest cost does not grow
+        if phase == 8 {
             self.rate
                 .hold_zero(&d.rate, dev14, dev2[3], self.was_settled);
+        } else if phase == 16 {
+            self.drift.refresh_lead(&d.fit.drift);
         }
         let th = self.rate.slow_theta(&dev2);
         // a gate is renewed while it lasts (the gate itself clears `settled`)
@@ -242,12 +262,15 @@ impl<T: Real> State<T> {
     fn update(&mut self, d: &Design<T>, k: u64, hold: bool, events: &mut u8) {
         let f = &d.fit;
         Counters::bump(&mut self.counters.updates, 1);
+        // each filter's trace (the anti-windup bound, the health's reading) is read on
+        // alternate samples (`Rls::begin_sample_with`)
+        let fresh = k & 1 == 0;
         if hold {
-            self.rls1.begin_sample_held();
-            self.rls2.begin_sample_held();
+            self.rls1.begin_sample_held_with(fresh);
+            self.rls2.begin_sample_held_with(!fresh);
         } else {
-            self.rls1.begin_sample();
-            self.rls2.begin_sample();
+            self.rls1.begin_sample_with(fresh);
+            self.rls2.begin_sample_with(!fresh);
         }
         self.walk_rate(f, k);
         let before = self.walk_drift(f, k);
@@ -450,7 +473,7 @@ impl<T: Real> State<T> {
             drive_locked: self.sup.locked(),
             settled,
             gated,
-            retuning: self.sup.ramping(),
+            retuning: self.sup.retuning(),
         }
     }
 
@@ -461,14 +484,13 @@ impl<T: Real> State<T> {
     fn retune(
         &mut self,
         d: &Design<T>,
-        k: u64,
+        (k, decide): (u64, bool),
         mut health: Health,
         wy2: T,
         drive_amp: T,
         events: &mut u8,
     ) -> Health {
         let om_ref = d.units.om_ref;
-        let decide = k.is_multiple_of(DECIDE_EVERY);
         let healthy = decide && health.actionable() && k >= self.bad_gate_until;
         // the centre (f64: soft float on the chip) only where it is read: the supervisor
         // reads it on a healthy decision tick, never otherwise
@@ -503,19 +525,22 @@ impl<T: Real> State<T> {
                 Counters::bump(&mut self.counters.retunes, 1);
                 *events |= event::RETUNE_START;
             }
+            RetuneAction::Track { target_om, len } => {
+                self.sched.ramp_to(target_om - om_ref, k + 1, len);
+            }
             RetuneAction::Abort { back_to_om, len } => {
                 self.sched.ramp_to(back_to_om - om_ref, k + 1, len);
                 Counters::bump(&mut self.counters.retune_aborts, 1);
                 *events |= event::RETUNE_ABORT;
             }
             RetuneAction::None => {
-                if health.retuning && !self.sup.ramping() {
+                if health.retuning && !self.sup.retuning() {
                     *events |= event::RETUNE_DONE;
                 }
             }
         }
         health.drive_locked = self.sup.locked();
-        health.retuning = self.sup.ramping();
+        health.retuning = self.sup.retuning();
         health
     }
 
