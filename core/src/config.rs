@@ -133,6 +133,11 @@ pub struct RetuneConfig {
     pub max_rate_hz_per_s: f64,
     /// No retune for a pump-centre move smaller than this, Hz.
     pub deadband_hz: f64,
+    /// Tracking: a move between this and `deadband_hz` is made at once as a short ramp
+    /// (50 ms, `retune::TRACK_RAMP`, or longer for `max_rate_hz_per_s`), with no
+    /// minimum interval, so that the pump follows a drifting ω̂y continuously within this
+    /// of 2ω̂y, Hz. 0: no tracking (the centre moves only by retunes).
+    pub track_hz: f64,
     /// The target stays this fraction of the drive's parametric band inside its edges.
     pub band_margin: f64,
     /// The estimate is settled when ω̂y² moved less than `settle_tol` (relative) over
@@ -285,6 +290,7 @@ const TABLE2_CONFIG: Config = Config {
         ramp_s: 0.5,
         max_rate_hz_per_s: 200.0,
         deadband_hz: 2.0,
+        track_hz: 0.25,
         band_margin: 0.05,
         settle_window_s: 0.5,
         settle_tol: 2e-5,
@@ -535,6 +541,13 @@ impl RetuneConfig {
         pos(t.ramp_s, "retune.ramp_s")?;
         pos(t.max_rate_hz_per_s, "retune.max_rate_hz_per_s")?;
         nonneg(t.deadband_hz, "retune.deadband_hz")?;
+        nonneg(t.track_hz, "retune.track_hz")?;
+        if t.track_hz > t.deadband_hz {
+            return Err(E::new(
+                "retune.track_hz",
+                "must be at most retune.deadband_hz",
+            ));
+        }
         if !(t.band_margin >= 0.0 && t.band_margin < 0.5) {
             return Err(E::new("retune.band_margin", "must be in [0, 0.5)"));
         }

@@ -42,6 +42,12 @@ pub fn drive_band<T: Real>(th1: &[T; 8], s: T) -> Option<(T, T)> {
     Some(((k - r).sqrt(), (k + r).sqrt()))
 }
 
+/// A tracking move's shortest ramp, samples (50 ms at 500 Hz, the supervisor's decision
+/// interval: a move ends before the next is decided; a 0.25 s ramp, tried, set off the
+/// change detector dozens of times in the firmware loop's warm-up, `paragyro-fil --
+/// warm-up`, with the board's half-step DDS).
+pub const TRACK_RAMP: u64 = 25;
+
 /// What the supervisor decided this tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum RetuneAction {
@@ -49,6 +55,14 @@ pub enum RetuneAction {
     None,
     /// Start a ramp of the centre to this ω (absolute, non-dimensional) over `len` samples.
     Start {
+        /// Target ω.
+        target_om: f64,
+        /// Ramp length in samples.
+        len: u64,
+    },
+    /// A tracking move (smaller than the dead band, larger than the tracking step): ramp
+    /// the centre to this ω over `len` samples, with no minimum interval after it.
+    Track {
         /// Target ω.
         target_om: f64,
         /// Ramp length in samples.
@@ -71,8 +85,15 @@ pub struct Supervisor<T> {
     ramp_min: u64,
     max_rate: f64,
     deadband: f64,
-    /// The dead band and margin in `T` (the decision's precision).
-    deadband_t: T,
+    /// Tracking moves are made (a tracking step > 0).
+    track_on: bool,
+    /// The smallest move made, ω: the tracking step, or the dead band without tracking.
+    trigger: f64,
+    /// A move of the dead band's size over [`TRACK_RAMP`] is within the rate limit.
+    track_within_rate: bool,
+    /// The smallest move in view in `T`: the tracking step, or the dead band without
+    /// tracking; the margin in `T` (the decision's precision).
+    trigger_t: T,
     margin: T,
     min_interval: u64,
     lock_min: T,
@@ -80,6 +101,9 @@ pub struct Supervisor<T> {
     below_since: Option<u64>,
     locked: bool,
     ramping: Option<(u64, u64, f64)>, // (start k, len, from ω)
+    /// The ramp in progress is a tracking move (no minimum interval after it).
+    tracking: bool,
+    tracks: u32,
     last_end: Option<u64>,
     retunes: u32,
     last_target: f64,
@@ -96,6 +120,8 @@ pub struct SupervisorSettings {
     pub max_rate: f64,
     /// Dead band, ω.
     pub deadband: f64,
+    /// Tracking step, ω (0: no tracking; at most `deadband`).
+    pub track: f64,
     /// Band margin, fraction of the band width.
     pub margin: f64,
     /// Minimum interval between retunes, samples.
@@ -133,7 +159,11 @@ impl<T: Real> Supervisor<T> {
             ramp_min: s.ramp_min.max(1),
             max_rate: s.max_rate,
             deadband: s.deadband,
-            deadband_t: T::from_f64(s.deadband),
+            track_on: s.track > 0.0,
+            trigger: if s.track > 0.0 { s.track } else { s.deadband },
+            track_within_rate: core::f64::consts::FRAC_PI_2 * s.deadband
+                <= s.max_rate * TRACK_RAMP as f64,
+            trigger_t: T::from_f64(if s.track > 0.0 { s.track } else { s.deadband }),
             margin: T::from_f64(s.margin),
             min_interval: s.min_interval,
             lock_min: T::from_f64(s.lock_min),
@@ -141,6 +171,8 @@ impl<T: Real> Supervisor<T> {
             below_since: None,
             locked: false,
             ramping: None,
+            tracking: false,
+            tracks: 0,
             last_end: None,
             retunes: 0,
             last_target: f64::NAN,
@@ -151,9 +183,17 @@ impl<T: Real> Supervisor<T> {
     pub fn locked(&self) -> bool {
         self.locked
     }
-    /// A retune ramp is in progress.
+    /// A ramp of the centre is in progress (a retune or a tracking move).
     pub fn ramping(&self) -> bool {
         self.ramping.is_some()
+    }
+    /// A retune ramp (not a tracking move) is in progress.
+    pub fn retuning(&self) -> bool {
+        self.ramping.is_some() && !self.tracking
+    }
+    /// Tracking moves started.
+    pub fn tracks(&self) -> u32 {
+        self.tracks
     }
     /// Completed or started retunes.
     pub fn retunes(&self) -> u32 {
@@ -164,9 +204,10 @@ impl<T: Real> Supervisor<T> {
         self.last_target
     }
 
-    /// Whether a retune is in view at sample `k` (so the caller computes the band only
-    /// then): allowed, locked, healthy, no ramp running, the minimum interval elapsed, and
-    /// √ω̂y² farther than the dead band from the centre. The band guard clamps the target
+    /// Whether a move is in view at sample `k` (so the caller computes the band only
+    /// then): allowed, locked, healthy, no ramp running, the minimum interval after a
+    /// retune elapsed, and √ω̂y² farther than the tracking step (the dead band without
+    /// tracking) from the centre. The band guard clamps the target
     /// of a retune; it does not trigger one by itself.
     pub fn would_retune(&self, k: u64, healthy: bool, wy2: T, centre_om: T) -> bool {
         if !(self.enabled && self.locked && healthy && self.ramping.is_none()) {
@@ -178,7 +219,7 @@ impl<T: Real> Supervisor<T> {
             return false;
         }
         // |√wy2 − c| > db without a square root: wy2 outside [(c − db)², (c + db)²]
-        let (lo, hi) = (centre_om - self.deadband_t, centre_om + self.deadband_t);
+        let (lo, hi) = (centre_om - self.trigger_t, centre_om + self.trigger_t);
         wy2.is_finite() && wy2 > T::ZERO && (wy2 < lo * lo || wy2 > hi * hi)
     }
 
@@ -212,6 +253,7 @@ impl<T: Real> Supervisor<T> {
         if let Some((k0, len, from)) = self.ramping {
             if !self.locked {
                 self.ramping = None;
+                self.tracking = false;
                 self.last_end = Some(i.k);
                 let done = (i.k - k0).min(len);
                 return RetuneAction::Abort {
@@ -221,7 +263,9 @@ impl<T: Real> Supervisor<T> {
             }
             if i.ramp_done || i.k >= k0 + len {
                 self.ramping = None;
-                self.last_end = Some(i.k);
+                if !self.tracking {
+                    self.last_end = Some(i.k);
+                }
             }
             return RetuneAction::None;
         }
@@ -239,17 +283,36 @@ impl<T: Real> Supervisor<T> {
         // the move in f64, where the centre lives
         let target = target.to_f64();
         let delta = target - i.centre_om;
-        if libm::fabs(delta) <= self.deadband {
+        let size = libm::fabs(delta);
+        // one soft-float comparison on a decision that makes no move (the chip's tick)
+        if size <= self.trigger {
             return RetuneAction::None;
         }
+        let tracking = self.track_on && size <= self.deadband;
         // raised cosine peak slope = π/2 · Δ / len  ≤ max_rate
-        let by_rate = (core::f64::consts::FRAC_PI_2 * libm::fabs(delta) / self.max_rate.max(1e-30))
-            as u64
-            + 1;
-        let len = self.ramp_min.max(by_rate);
+        let by_rate =
+            |size: f64| (core::f64::consts::FRAC_PI_2 * size / self.max_rate.max(1e-30)) as u64 + 1;
+        self.tracking = tracking;
+        self.last_target = target;
+        if tracking {
+            // within the next decision: the move is done before the next one is made (the
+            // rate limit's length only where a dead band's move would exceed it, so that
+            // a tracking move's tick costs no soft-float division)
+            let len = if self.track_within_rate {
+                TRACK_RAMP
+            } else {
+                TRACK_RAMP.max(by_rate(size))
+            };
+            self.ramping = Some((i.k, len, i.centre_om));
+            self.tracks = self.tracks.saturating_add(1);
+            return RetuneAction::Track {
+                target_om: target,
+                len,
+            };
+        }
+        let len = self.ramp_min.max(by_rate(size));
         self.ramping = Some((i.k, len, i.centre_om));
         self.retunes = self.retunes.saturating_add(1);
-        self.last_target = target;
         RetuneAction::Start {
             target_om: target,
             len,
@@ -294,6 +357,7 @@ mod tests {
             ramp_min: 250,
             max_rate: 1e-5,
             deadband: 1e-4,
+            track: 0.0,
             margin: 0.1,
             min_interval: 500,
             lock_min: 0.2,
@@ -338,6 +402,58 @@ mod tests {
             }
         }
         assert!(aborted && !s.locked());
+    }
+
+    /// With a tracking step: a move between it and the dead band is a tracking move of
+    /// [`TRACK_RAMP`] samples, not a retune (no `retuning`, no minimum interval: the next
+    /// decision after it may move again); a move within the step is none; beyond the dead
+    /// band a retune as without tracking.
+    #[test]
+    fn moves_below_the_dead_band_are_tracking_moves() {
+        let mut s = Supervisor::<f64>::new(SupervisorSettings {
+            track: 2e-5,
+            ..settings()
+        });
+        let band = drive_band(&th1_table2(), 1.0);
+        let c = 1.02f64;
+        let mut inp = RetuneInputs {
+            k: 0,
+            healthy: true,
+            wy2: (c + 1e-5) * (c + 1e-5),
+            band,
+            centre_om: c,
+            drive_amp: 1.7,
+            ramp_done: true,
+        };
+        assert_eq!(s.tick(&inp), RetuneAction::None, "within the tracking step");
+        inp.wy2 = (c + 5e-5) * (c + 5e-5);
+        inp.k = 25;
+        match s.tick(&inp) {
+            RetuneAction::Track { target_om, len } => {
+                assert!((target_om - (c + 5e-5)).abs() < 1e-12);
+                assert_eq!(len, TRACK_RAMP);
+            }
+            a => panic!("expected a tracking move, got {a:?}"),
+        }
+        assert!(s.ramping() && !s.retuning());
+        assert_eq!((s.tracks(), s.retunes()), (1, 0));
+        // the move ends; the next decision moves again, with no minimum interval
+        inp.k = 50;
+        assert_eq!(s.tick(&inp), RetuneAction::None);
+        assert!(!s.ramping());
+        inp.centre_om = c + 5e-5;
+        inp.wy2 = (c + 1e-4) * (c + 1e-4);
+        inp.k = 75;
+        assert!(matches!(s.tick(&inp), RetuneAction::Track { .. }));
+        // beyond the dead band: a retune
+        inp.k = 200;
+        inp.ramp_done = true;
+        assert_eq!(s.tick(&inp), RetuneAction::None);
+        inp.wy2 = (c + 5e-4) * (c + 5e-4);
+        inp.k = 225;
+        assert!(matches!(s.tick(&inp), RetuneAction::Start { .. }));
+        assert!(s.retuning());
+        assert_eq!((s.tracks(), s.retunes()), (2, 1));
     }
 
     #[test]

@@ -108,6 +108,9 @@ const FIELDS: &[(&str, Rule, Setter)] = &[
     ("retune.max_rate_hz_per_s", Rule::Pos, |c, v| {
         c.retune.max_rate_hz_per_s = v
     }),
+    ("retune.track_hz", Rule::NonNeg, |c, v| {
+        c.retune.track_hz = v
+    }),
     ("retune.deadband_hz", Rule::NonNeg, |c, v| {
         c.retune.deadband_hz = v
     }),
@@ -180,6 +183,9 @@ proptest! {
         let mut c = t2;
         c.lockin_lpf_order = order;
         check(&c, "lockin_lpf_order")?;
+        let mut c = t2;
+        c.retune.track_hz = c.retune.deadband_hz * (1.0 + factor);
+        check(&c, "retune.track_hz")?;
         let mut c = t2;
         c.fs_hz = c.f0_hz * factor;
         check(&c, "fs_hz")?;

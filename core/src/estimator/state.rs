@@ -436,6 +436,7 @@ fn supervisor_settings(cfg: &Config) -> SupervisorSettings {
         ramp_min: samples(t.ramp_s).max(1),
         max_rate: t.max_rate_hz_per_s / (2.0 * cfg.f0_hz) / cfg.fs_hz,
         deadband: t.deadband_hz / (2.0 * cfg.f0_hz),
+        track: t.track_hz / (2.0 * cfg.f0_hz),
         margin: t.band_margin,
         min_interval: samples(t.min_interval_s),
         lock_min: t.lock_min_um / cfg.l0_um,
