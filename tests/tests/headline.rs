@@ -220,6 +220,7 @@ fn rate_source() -> String {
         precision: paragyro_simulator::runner::Precision::F32,
         seed: 1,
         allan_s: None,
+        allan_zero_memory_s: None,
     };
     let f = chirp(&o, 0.1, 200.0, 20.0, 24.0).expect("chirp");
     let (st, _) = step(&o).expect("step");

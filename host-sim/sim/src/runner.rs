@@ -81,6 +81,9 @@ pub fn core_config(sc: &Scenario) -> Config {
     if let Some(w) = sc.estimator.rate_walk_dps {
         c.rate.walk_dps = w;
     }
+    if let Some(t) = sc.estimator.retune_track_hz {
+        c.retune.track_hz = t;
+    }
     if let Some(m) = sc.estimator.rate_zero_memory_s {
         c.rate.zero_memory_s = m;
     }

@@ -12,6 +12,7 @@ fn opts(seed: u64) -> Options {
         precision: Precision::F32,
         seed,
         allan_s: None,
+        allan_zero_memory_s: None,
     }
 }
 

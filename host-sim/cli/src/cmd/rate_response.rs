@@ -23,6 +23,10 @@ pub struct Args {
     /// Also run the static Allan runs (0 and 150 °/s) of this many seconds each.
     #[arg(long, value_name = "S")]
     pub allan_s: Option<f64>,
+    /// The Allan runs' memory of the rate's zero μ̂xy, s (core `rate.zero_memory_s`; 0: the
+    /// slow RLS's 2 s estimate every sample), instead of the core's 600 s.
+    #[arg(long, value_name = "S")]
+    pub allan_zero_memory_s: Option<f64>,
 }
 
 /// Runs every measurement and writes the report.
@@ -34,10 +38,18 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
             "--allan-s must be at least 10 s (got {s})"
         )));
     }
+    if let Some(m) = a.allan_zero_memory_s
+        && !(m.is_finite() && m >= 0.0)
+    {
+        return Err(fail(EXIT_RUN)(anyhow::anyhow!(
+            "--allan-zero-memory-s must be finite and >= 0 (got {m})"
+        )));
+    }
     let o = Options {
         precision: a.precision.into(),
         seed: a.seed,
         allan_s: a.allan_s,
+        allan_zero_memory_s: a.allan_zero_memory_s,
     };
     let (report, files) = rate_response::run_all(&o, &a.out).map_err(fail(EXIT_RUN))?;
     let mut text = format!(

@@ -33,6 +33,18 @@ pub struct Args {
     /// scenario's or the core's.
     #[arg(long, value_name = "KAPPA")]
     pub drift_kappa: Option<f64>,
+    /// The retune supervisor's tracking step, Hz (core `retune.track_hz`; 0: the pump moves
+    /// only by retunes, through the 2 Hz dead band), instead of the scenario's or the core's.
+    #[arg(long, value_name = "HZ")]
+    pub track_hz: Option<f64>,
+    /// The modes' frequency TCFs, drive and sense, ppm/K, instead of the scenario's.
+    #[arg(
+        long,
+        value_name = "DRIVE,SENSE",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub tcf_ppm_k: Option<Vec<f64>>,
     /// Withhold the die temperature from the core (the scenario's `sensor = false`): the
     /// drift followed by the walk alone.
     #[arg(long)]
@@ -62,13 +74,23 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
             )?,
         };
     if let Some(k) = a.drift_kappa {
-        if !(k.is_finite() && k >= 0.0) {
+        sc.estimator.drift_kappa = Some(non_negative("--drift-kappa", k)?);
+    }
+    if let Some(t) = a.track_hz {
+        sc.estimator.retune_track_hz = Some(non_negative("--track-hz", t)?);
+    }
+    if let (Some(tcf), Some(t)) = (&a.tcf_ppm_k, sc.temperature.as_mut()) {
+        if let [wx, wy] = tcf[..]
+            && wx.is_finite()
+            && wy.is_finite()
+        {
+            (t.tcf_wx_ppm_k, t.tcf_wy_ppm_k) = (wx, wy);
+        } else {
             return Err(Failure {
                 code: EXIT_LOAD,
-                error: anyhow::anyhow!("--drift-kappa must be finite and >= 0 (got {k})"),
+                error: anyhow::anyhow!("--tcf-ppm-k takes two finite values (got {tcf:?})"),
             });
         }
-        sc.estimator.drift_kappa = Some(k);
     }
     if let (true, Some(t)) = (a.no_sensor, sc.temperature.as_mut()) {
         t.sensor = false;
@@ -124,6 +146,18 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     ));
     text.push_str(&file_list(&files));
     ctx.say(&text)
+}
+
+/// A flag's value that must be finite and ≥ 0, or the load error naming it.
+fn non_negative(flag: &str, v: f64) -> Result<f64, Failure> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(Failure {
+            code: EXIT_LOAD,
+            error: anyhow::anyhow!("{flag} must be finite and >= 0 (got {v})"),
+        })
+    }
 }
 
 /// The profile's one ramp (points: held, ramp start, ramp end) stretched to `ramp_s` and

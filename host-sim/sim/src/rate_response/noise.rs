@@ -128,7 +128,9 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
             "[[event]]\nt_s = 0.0\nkind = \"ramp\"\nparam = \"rate_dps\"\nto = {rate_dps}\nduration_s = 0.0\n"
         )
     };
-    let tr = trace(&scenario(&ev, T0_S + duration_s)?, o.precision, o.seed)?;
+    let mut sc = scenario(&ev, T0_S + duration_s)?;
+    sc.estimator.rate_zero_memory_s = o.allan_zero_memory_s;
+    let tr = trace(&sc, o.precision, o.seed)?;
     let y: Vec<f64> = tr
         .iter()
         .filter(|r| r.t_s >= T0_S)

@@ -370,6 +370,9 @@ pub struct EstimatorSpec {
     /// The slow RLS's rate random walk per sample, °/s (core `rate.walk_dps`); `None`:
     /// the core's default.
     pub rate_walk_dps: Option<f64>,
+    /// The retune supervisor's tracking step, Hz (core `retune.track_hz`; 0: the pump
+    /// moves only by retunes); `None`: the core's default (0.25 Hz).
+    pub retune_track_hz: Option<f64>,
     /// Memory of the rate's zero μ̂xy, s (core `rate.zero_memory_s`; 0: the slow RLS's
     /// μ̂xy every sample); `None`: the core's default (600 s).
     pub rate_zero_memory_s: Option<f64>,
@@ -394,6 +397,7 @@ impl Default for EstimatorSpec {
             retune: true,
             retune_ramp_s: 0.5,
             rate_walk_dps: None,
+            retune_track_hz: None,
             rate_zero_memory_s: None,
             drift_kappa: None,
             nominal: NominalSpec::default(),

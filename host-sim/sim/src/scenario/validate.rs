@@ -98,6 +98,9 @@ impl Scenario {
         if let Some(w) = est.rate_walk_dps {
             non_negative(w, path(&["estimator", "rate_walk_dps"]))?;
         }
+        if let Some(t) = est.retune_track_hz {
+            non_negative(t, path(&["estimator", "retune_track_hz"]))?;
+        }
         if let Some(m) = est.rate_zero_memory_s {
             non_negative(m, path(&["estimator", "rate_zero_memory_s"]))?;
         }
