@@ -284,8 +284,7 @@ pub(crate) fn confirm(
 /// candidates against 21 on 18).
 ///
 /// Each pick comes with whether the first rule chose it: the second rule's candidates are
-/// re-simulated only with the runs the first rule's leave of the budget (a thermal drift
-/// at 45× its limit needs three, `a_large_thermal_drift_is_confirmed_by_resimulation_given_three_runs`).
+/// re-simulated only with the runs the first rule's leave of the budget.
 fn picks(inp: &Inputs<'_>, ranking: &[Candidate]) -> Vec<(Effect, bool)> {
     let max = CONFIRM_MAX.min(inp.opts.confirm_runs);
     let t_of = |c: &Candidate| match (c.size, c.size_sigma) {
