@@ -282,3 +282,39 @@ fn the_thermal_report_reads_the_warm_up() {
     let plain = Scenario::builtin("drift-retune").expect("built in");
     assert!(paragyro_simulator::thermal::ThermalReport::of(&plain, &r.trace).is_err());
 }
+
+/// The targets on the 10 K warm-up over 40 s, at −30/−33 ppm/K and with equal
+/// TCFs (−30/−30), the die temperature in the samples: no covariance reset after the
+/// start-up, the rate's error rms during the ramp ≤ 1.2× its rms before it, and the sense
+/// amplitude ≥ 98 % of the oracle twin's (pump at 2·f_y) at every second. The rate valid
+/// on ≥ 95 % of the ramp: the 99 % is not met (96.8–97.0 %: the drive-steadiness
+/// gate at the dithers' dips, as at a constant temperature; host-sim/docs/benchmarks.md).
+#[test]
+fn a_40_s_warm_up_holds_the_rate_at_both_tcfs() {
+    for tcf_wy in [-33.0, -30.0] {
+        let mut sc = warm_up();
+        let t = sc.temperature.as_mut().expect("a profile");
+        t.points = vec![[0.0, 25.0], [5.0, 25.0], [45.0, 35.0]];
+        t.tcf_wy_ppm_k = tcf_wy;
+        sc.duration_s = 47.0;
+        let r = run_f32(&sc);
+        let rep = paragyro_simulator::thermal::ThermalReport::of(&sc, &r.trace).expect("a report");
+        let oracle = paragyro_simulator::thermal::oracle_sense_amp(&sc, sc.seed).expect("oracle");
+        let rep = rep.with_oracle(&r.trace, &oracle);
+        let ratio = rep.rate_err_rms_during_dps / rep.rate_err_rms_before_dps;
+        let what = format!(
+            "TCF {tcf_wy}: resets {}, valid {:.1} %, error {:.2}×, sense {:?}",
+            rep.resets_after_startup,
+            100.0 * rep.valid_during,
+            ratio,
+            rep.sense_amp_vs_oracle_min
+        );
+        assert_eq!(rep.resets_after_startup, 0, "{what}");
+        assert!(rep.valid_during >= 0.95, "{what}");
+        assert!(ratio <= 1.2, "{what}");
+        assert!(
+            rep.sense_amp_vs_oracle_min.expect("whole seconds") >= 0.98,
+            "{what}"
+        );
+    }
+}
