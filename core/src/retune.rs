@@ -284,8 +284,9 @@ impl<T: Real> Supervisor<T> {
         let target = target.to_f64();
         let delta = target - i.centre_om;
         let size = libm::fabs(delta);
-        // one soft-float comparison on a decision that makes no move (the chip's tick)
-        if size <= self.trigger {
+        // one soft-float comparison on a decision that makes no move (the chip's tick); a
+        // NaN or infinite move (an estimate gone wild) is none
+        if !(size > self.trigger && size.is_finite()) {
             return RetuneAction::None;
         }
         let tracking = self.track_on && size <= self.deadband;
