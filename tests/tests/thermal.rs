@@ -49,7 +49,7 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
         .iter()
         .filter(|x| (5.0..25.0).contains(&x.t_s))
         .collect();
-    let valid = ramp.iter().filter(|x| x.rate_valid).count() as f64 / ramp.len() as f64;
+    let valid = valid_share(&r, 5.0, 25.0);
     assert!(
         valid >= 0.95,
         "rate valid on {:.1} % of the ramp",
@@ -96,13 +96,7 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
         sc.seed = seed;
         let r = run_f32(&sc);
         let resets = resets_after(&r, 2.5);
-        let ramp: Vec<_> = r
-            .trace
-            .iter()
-            .filter(|x| (5.0..25.0).contains(&x.t_s))
-            .collect();
-        let valid = ramp.iter().filter(|x| x.rate_valid).count() as f64 / ramp.len() as f64;
-        worst.push((seed, resets, valid));
+        worst.push((seed, resets, valid_share(&r, 5.0, 25.0)));
     }
     assert!(worst.iter().all(|w| w.1 <= 3), "{worst:?}");
     let good = worst.iter().filter(|w| w.1 == 0 && w.2 >= 0.95).count();
@@ -110,6 +104,16 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
 }
 
 /// Covariance resets after `t_s`.
+/// The share of the samples in [from, to) s whose rate is flagged valid.
+fn valid_share(r: &RunResult, from: f64, to: f64) -> f64 {
+    let span: Vec<_> = r
+        .trace
+        .iter()
+        .filter(|x| (from..to).contains(&x.t_s))
+        .collect();
+    span.iter().filter(|x| x.rate_valid).count() as f64 / span.len() as f64
+}
+
 fn resets_after(r: &RunResult, t_s: f64) -> u32 {
     let at = r.trace.iter().find(|x| x.t_s >= t_s).expect("in the run");
     r.trace.last().expect("a trace").resets - at.resets
