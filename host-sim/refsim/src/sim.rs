@@ -117,6 +117,27 @@ fn wrap(p: f64) -> f64 {
     p - std::f64::consts::TAU * ((p + std::f64::consts::PI) / std::f64::consts::TAU).floor()
 }
 
+/// What drives the lock-in: a plant (its states, their derivative, what the pick-offs
+/// read), or a synthetic signal (the tests' tones).
+pub trait Source {
+    /// d/dt of the source's states.
+    fn rhs(&self, t_s: f64, q: &[f64; NQ], u: &Inputs) -> [f64; NQ];
+    /// What the pick-offs read, m, with the reference e^{iψ} = (`c1`, `s1`) at hand.
+    fn measure(&self, t_s: f64, q: &[f64; NQ], u: &Inputs, c1: f64, s1: f64) -> [f64; 2];
+}
+
+impl Source for Plant {
+    #[inline]
+    fn rhs(&self, t_s: f64, q: &[f64; NQ], u: &Inputs) -> [f64; NQ] {
+        Plant::rhs(self, t_s, q, u)
+    }
+
+    #[inline]
+    fn measure(&self, _t_s: f64, q: &[f64; NQ], u: &Inputs, _c1: f64, _s1: f64) -> [f64; 2] {
+        Plant::measure(self, q, u)
+    }
+}
+
 /// The result of one simulated record.
 #[derive(Clone, Debug)]
 pub struct Simulated {
@@ -126,10 +147,113 @@ pub struct Simulated {
     pub stats: Stats,
 }
 
-/// Simulates `proto` on the device `dev` with the effects `fx` through the front end `fe`.
+/// Simulates `proto` on the device `dev` with the effects `fx` through the front end `fe`
+/// (whose low-pass is off by the effects' lock-in mismatch).
 pub fn simulate(
     dev: &SiDevice,
     fx: &EffectSizes,
+    proto: &Protocol,
+    fe: &FrontEnd,
+) -> Result<Simulated, String> {
+    let plant = Plant::new(*dev, *fx, proto.pump_hz(0.0));
+    let fe_true = FrontEnd {
+        lpf_hz: fe.lpf_hz * (1.0 + fx.lockin_mismatch),
+        ..fe.clone()
+    };
+    let mut q0 = [0.0; NQ];
+    q0[0] = fe.x0_m;
+    run(&plant, q0, proto, &fe_true)
+}
+
+/// The integrator's tolerances for `dim` states: 1e-11 µm on the plant's displacements
+/// (velocities × ω0) with the relative tolerance on each oscillator's amplitude, the
+/// ladders riding along (or, with `control_lockin`, each at 1e-6 µm).
+fn tolerances(fe: &FrontEnd, dim: usize, ts: f64) -> Tolerances {
+    let w0 = OMEGA0_RAD_S;
+    let a_pos = 1e-11 * L0_M;
+    let ladder_atol = if fe.control_lockin {
+        1e-6 * L0_M
+    } else {
+        f64::INFINITY
+    };
+    let mut atol = vec![ladder_atol; dim];
+    for (i, a) in atol.iter_mut().enumerate().take(NQ) {
+        *a = if i % 2 == 1 { a_pos * w0 } else { a_pos };
+    }
+    Tolerances {
+        rtol: fe.rtol,
+        atol,
+        h_max: ts / 4.0,
+        pair_omega: (!fe.control_lockin).then_some(w0),
+    }
+}
+
+/// The pick-off noise through the ladders, one exactly discretised process per channel.
+struct NoiseBank {
+    disc: NoiseDiscretisation,
+    xi: Vec<[f64; MAX_ORDER]>,
+    /// One-sided density, m/√Hz.
+    density: f64,
+    rng: Xoshiro256PlusPlus,
+}
+
+impl NoiseBank {
+    fn new(ladder: &Ladder, ts: f64, fe: &FrontEnd) -> Self {
+        Self {
+            disc: NoiseDiscretisation::new(ladder, ts),
+            xi: vec![[0.0; MAX_ORDER]; NCH],
+            density: fe.noise_pm_rthz * 1e-12,
+            rng: Xoshiro256PlusPlus::seed_from_u64(fe.seed),
+        }
+    }
+
+    /// Advances every channel by one sample period.
+    fn step(&mut self) {
+        if self.density <= 0.0 {
+            return;
+        }
+        let n = self.disc.n;
+        let mut w = [0.0; MAX_ORDER];
+        for (c, x) in self.xi.iter_mut().enumerate() {
+            // two-sided densities: D²/2 on the DC channels, D² on each harmonic's re, im
+            let sig = if c == 0 || c == 7 {
+                self.density * std::f64::consts::FRAC_1_SQRT_2
+            } else {
+                self.density
+            };
+            for v in w.iter_mut().take(n) {
+                *v = StandardNormal.sample(&mut self.rng);
+            }
+            self.disc.step(&mut x[..n], sig, &w[..n]);
+        }
+    }
+}
+
+/// The row of sample `k`: the protocol's inputs and the ladders' outputs (µm).
+fn row(proto: &Protocol, k: usize, ladder: &Ladder, y: &[f64], noise: &NoiseBank) -> Row {
+    let t = proto.t(k);
+    let no = ladder.n;
+    let mut li = [0.0; NCH];
+    for (c, v) in li.iter_mut().enumerate() {
+        let s = &y[NQ + c * no..NQ + (c + 1) * no];
+        *v = (ladder.output(s) + ladder.output(&noise.xi[c][..no])) / L0_M;
+    }
+    Row {
+        t_s: t,
+        pump_hz: proto.pump_hz(t),
+        pump_amp_v: proto.pump_amp_ref_v * proto.pump_scale(t).sqrt(),
+        accel_mps2: proto.accel(t),
+        lockin_um: li,
+        temp_c: (proto.temp_c(t) * 100.0).round() / 100.0,
+        rate_ref_dps: proto.rate_dps(t).0,
+    }
+}
+
+/// Runs the front end of `fe` (its `lpf_hz` is the true cut-off) on `src` started at `q0`
+/// over the protocol `proto`.
+pub fn run<S: Source>(
+    src: &S,
+    q0: [f64; NQ],
     proto: &Protocol,
     fe: &FrontEnd,
 ) -> Result<Simulated, String> {
@@ -141,64 +265,16 @@ pub fn simulate(
         ));
     }
     let ts = 1.0 / proto.fs_hz;
-    let lp_true = fe.lpf_hz * (1.0 + fx.lockin_mismatch);
-    let ladder = Ladder::new(fe.lpf_order, lp_true)?;
+    let ladder = Ladder::new(fe.lpf_order, fe.lpf_hz)?;
     let no = ladder.n;
-    let noise_disc = NoiseDiscretisation::new(&ladder, ts);
-    let d_m = fe.noise_pm_rthz * 1e-12; // one-sided, m/√Hz
-    let sig_dc = d_m / std::f64::consts::SQRT_2;
-    let sig_h = d_m;
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(fe.seed);
-    let plant = Plant::new(*dev, *fx, proto.pump_hz(0.0));
-
+    let mut noise = NoiseBank::new(&ladder, ts, fe);
     let dim = NQ + NCH * no;
     let mut y0 = vec![0.0; dim];
-    y0[0] = fe.x0_m;
-    let w0 = OMEGA0_RAD_S;
-    // absolute tolerances: 1e-8 µm on the plant's displacements (velocities × ω0), 1e-6 µm
-    // on the ladders (a tenth of a percent of one sample's noise; the ladders forget an
-    // error within a few ms, and their mixer inputs are µm-sized even where the filtered
-    // output is near zero)
-    let a_pos = 1e-11 * L0_M;
-    let ladder_atol = if fe.control_lockin {
-        1e-6 * L0_M
-    } else {
-        f64::INFINITY
-    };
-    let mut atol = vec![ladder_atol; dim];
-    for (i, a) in atol.iter_mut().enumerate().take(NQ) {
-        *a = if i % 2 == 1 { a_pos * w0 } else { a_pos };
-    }
-    let tol = Tolerances {
-        rtol: fe.rtol,
-        atol,
-        h_max: ts / 4.0,
-        pair_omega: (!fe.control_lockin).then_some(w0),
-    };
-    let mut ode = Dopri::new(0.0, y0, tol, 1e-6);
-
-    let mut xi = vec![[0.0; MAX_ORDER]; NCH];
+    y0[..NQ].copy_from_slice(&q0);
+    let mut ode = Dopri::new(0.0, y0, tolerances(fe, dim, ts), 1e-6);
     let mut rows = Vec::with_capacity(n_int + 1);
+    rows.push(row(proto, 0, &ladder, &ode.y, &noise));
     let mut psi_k = 0.0;
-    let row = |k: usize, ode: &Dopri, xi: &[[f64; MAX_ORDER]]| {
-        let t = proto.t(k);
-        let mut li = [0.0; NCH];
-        for (c, v) in li.iter_mut().enumerate() {
-            let s = &ode.y[NQ + c * no..NQ + (c + 1) * no];
-            *v = (ladder.output(s) + ladder.output(&xi[c][..no])) / L0_M;
-        }
-        Row {
-            t_s: t,
-            pump_hz: proto.pump_hz(t),
-            pump_amp_v: proto.pump_amp_ref_v * proto.pump_scale(t).sqrt(),
-            accel_mps2: proto.accel(t),
-            lockin_um: li,
-            temp_c: (proto.temp_c(t) * 100.0).round() / 100.0,
-            rate_ref_dps: proto.rate_dps(t).0,
-        }
-    };
-    rows.push(row(0, &ode, &xi));
-    let mut wbuf = [0.0; MAX_ORDER];
     for k in 0..n_int {
         let (t0, t1) = (proto.t(k), proto.t(k + 1));
         let (f0, f1) = (proto.pump_hz(t0), proto.pump_hz(t1));
@@ -208,11 +284,12 @@ pub fn simulate(
         let mut rhs = |t: f64, y: &[f64], dy: &mut [f64]| {
             let tau = t - t0;
             let frac = tau / ts;
+            // ψ' = π·pump_hz, pump_hz linear over the interval: ψ exact
             let psi = psi_k + std::f64::consts::PI * tau * (f0 + 0.5 * chirp * tau);
-            let (s1p, c1p) = psi.sin_cos();
+            let (sn, cs) = psi.sin_cos();
             let (r, rd) = proto.rate_dps(t);
             let u = Inputs {
-                cos2psi: c1p * c1p - s1p * s1p,
+                cos2psi: cs * cs - sn * sn,
                 s: s0 + (s1 - s0) * frac,
                 ax: a0[0] + (a1[0] - a0[0]) * frac,
                 ay: a0[1] + (a1[1] - a0[1]) * frac,
@@ -221,11 +298,9 @@ pub fn simulate(
                 temp_c: proto.temp_c(t),
             };
             let q: &[f64; NQ] = y[..NQ].try_into().expect("plant states");
-            let dq = plant.rhs(t, q, &u);
-            dy[..NQ].copy_from_slice(&dq);
-            let [xm, ym] = plant.measure(q, &u);
-            let m = mix(xm, ym, c1p, s1p);
-            for (c, mc) in m.iter().enumerate() {
+            dy[..NQ].copy_from_slice(&src.rhs(t, q, &u));
+            let [xm, ym] = src.measure(t, q, &u, cs, sn);
+            for (c, mc) in mix(xm, ym, cs, sn).iter().enumerate() {
                 let off = NQ + c * no;
                 ladder.deriv(&y[off..off + no], *mc, &mut dy[off..off + no]);
             }
@@ -235,16 +310,8 @@ pub fn simulate(
             return Err(format!("the state is not finite at t = {t1} s"));
         }
         psi_k = wrap(psi_k + std::f64::consts::PI * ts * 0.5 * (f0 + f1));
-        if d_m > 0.0 {
-            for (c, x) in xi.iter_mut().enumerate() {
-                let sig = if c == 0 || c == 7 { sig_dc } else { sig_h };
-                for w in wbuf.iter_mut().take(no) {
-                    *w = StandardNormal.sample(&mut rng);
-                }
-                noise_disc.step(&mut x[..no], sig, &wbuf[..no]);
-            }
-        }
-        rows.push(row(k + 1, &ode, &xi));
+        noise.step();
+        rows.push(row(proto, k + 1, &ladder, &ode.y, &noise));
     }
     Ok(Simulated {
         rows,
