@@ -157,7 +157,7 @@ impl Protocol {
         ];
         let reversal = (u(0.0, 1.0) < 0.4).then(|| Reversal {
             t_s: u(0.35, 0.65) * d,
-            ramp_s: u(0.2, 1.0),
+            ramp_s: u(0.2, 1.0).min(0.2 * d),
         });
         let accel_wobble_mps2 = u(0.0, 0.5);
         let accel_wobble_hz = u(0.2, 2.0);
