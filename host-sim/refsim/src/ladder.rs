@@ -27,8 +27,13 @@ pub struct Ladder {
     pub n: usize,
     /// Cut-off, rad/s.
     pub wc: f64,
-    /// 1/g_k, the inverse element values.
-    inv_g: Vec<f64>,
+    /// Row k of the tridiagonal `wc·A`: the coefficients of x[k−1], x[k], x[k+1]. A
+    /// shunt capacitor (k even) sees the current in minus the current out of its node
+    /// (from the source through 1 Ω at k = 0, into the 1 Ω load at the end); a series
+    /// inductor (k odd) the voltage across it (onto the load at the end).
+    tri: [[f64; 3]; MAX_ORDER],
+    /// The source's gain into x[0], wc/g_1.
+    b0: f64,
 }
 
 impl Ladder {
@@ -40,36 +45,69 @@ impl Ladder {
         if !(hz.is_finite() && hz > 0.0) {
             return Err(format!("low-pass cut-off {hz} Hz must be positive"));
         }
-        let inv_g = (1..=n)
-            .map(|k| {
-                let g = 2.0 * ((2 * k - 1) as f64 * std::f64::consts::PI / (2 * n) as f64).sin();
-                1.0 / g
-            })
-            .collect();
-        Ok(Self {
-            n,
-            wc: std::f64::consts::TAU * hz,
-            inv_g,
-        })
+        let wc = std::f64::consts::TAU * hz;
+        let mut tri = [[0.0; 3]; MAX_ORDER];
+        let mut b0 = 0.0;
+        for (k, row) in tri.iter_mut().enumerate().take(n) {
+            let g = 2.0 * ((2 * k + 1) as f64 * std::f64::consts::PI / (2 * n) as f64).sin();
+            let w = wc / g;
+            let first = k == 0;
+            let last = k + 1 == n;
+            if first {
+                b0 = w; // (u − x0)/R_s
+            }
+            row[0] = if first { 0.0 } else { w };
+            row[1] = -w * (f64::from(u8::from(first)) + f64::from(u8::from(last)));
+            row[2] = if last { 0.0 } else { -w };
+        }
+        Ok(Self { n, wc, tri, b0 })
     }
 
     /// `dx/dt` of one channel's ladder with input `u` (the source voltage).
     #[inline(always)]
     pub fn deriv(&self, x: &[f64], u: f64, dx: &mut [f64]) {
         let n = self.n;
-        let wc = self.wc;
         for k in 0..n {
-            let (inflow, outflow) = if k % 2 == 0 {
-                // shunt capacitor: currents in and out of its node
-                let inflow = if k == 0 { u - x[0] } else { x[k - 1] };
-                let outflow = if k + 1 == n { x[k] } else { x[k + 1] };
-                (inflow, outflow)
-            } else {
-                // series inductor: voltages on both sides
-                let right = if k + 1 == n { x[k] } else { x[k + 1] };
-                (x[k - 1], right)
-            };
-            dx[k] = wc * self.inv_g[k] * (inflow - outflow);
+            let mut v = self.tri[k][1] * x[k];
+            if k > 0 {
+                v += self.tri[k][0] * x[k - 1];
+            }
+            if k + 1 < n {
+                v += self.tri[k][2] * x[k + 1];
+            }
+            dx[k] = v;
+        }
+        dx[0] += self.b0 * u;
+    }
+
+    /// `dx/dt` of a bank of `C` ladders stored state-major (`x[k·C + c]`: state k of
+    /// channel c), with the inputs `u`: the same tridiagonal equations, each state row a
+    /// loop over the channels.
+    #[inline(always)]
+    pub fn deriv_bank<const C: usize>(&self, x: &[f64], u: &[f64; C], dx: &mut [f64]) {
+        let n = self.n;
+        for k in 0..n {
+            let [lo, di, up] = self.tri[k];
+            let row = &mut dx[k * C..(k + 1) * C];
+            let xk = &x[k * C..(k + 1) * C];
+            for c in 0..C {
+                row[c] = di * xk[c];
+            }
+            if k > 0 {
+                let xl = &x[(k - 1) * C..k * C];
+                for c in 0..C {
+                    row[c] += lo * xl[c];
+                }
+            }
+            if k + 1 < n {
+                let xu = &x[(k + 1) * C..(k + 2) * C];
+                for c in 0..C {
+                    row[c] += up * xu[c];
+                }
+            }
+        }
+        for c in 0..C {
+            dx[c] += self.b0 * u[c];
         }
     }
 

@@ -235,8 +235,9 @@ fn row(proto: &Protocol, k: usize, ladder: &Ladder, y: &[f64], noise: &NoiseBank
     let no = ladder.n;
     let mut li = [0.0; NCH];
     for (c, v) in li.iter_mut().enumerate() {
-        let s = &y[NQ + c * no..NQ + (c + 1) * no];
-        *v = (ladder.output(s) + ladder.output(&noise.xi[c][..no])) / L0_M;
+        // the ladders are stored state-major: the last state of channel c
+        let out = 2.0 * y[NQ + (no - 1) * NCH + c];
+        *v = (out + ladder.output(&noise.xi[c][..no])) / L0_M;
     }
     Row {
         t_s: t,
@@ -300,10 +301,7 @@ pub fn run<S: Source>(
             let q: &[f64; NQ] = y[..NQ].try_into().expect("plant states");
             dy[..NQ].copy_from_slice(&src.rhs(t, q, &u));
             let [xm, ym] = src.measure(t, q, &u, cs, sn);
-            for (c, mc) in mix(xm, ym, cs, sn).iter().enumerate() {
-                let off = NQ + c * no;
-                ladder.deriv(&y[off..off + no], *mc, &mut dy[off..off + no]);
-            }
+            ladder.deriv_bank(&y[NQ..], &mix(xm, ym, cs, sn), &mut dy[NQ..]);
         };
         ode.advance_to(t1, &mut rhs);
         if !ode.y.iter().all(|v| v.is_finite()) {
