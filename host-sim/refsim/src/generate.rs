@@ -188,11 +188,18 @@ impl Draw {
         e
     }
 
-    /// Simulates this record through a front end of the given low-pass.
-    pub fn simulate(&self, lpf_order: usize, lpf_hz: f64) -> anyhow::Result<sim::Simulated> {
+    /// Simulates this record through a front end of the given low-pass, at the
+    /// integrator's relative tolerance `rtol`.
+    pub fn simulate(
+        &self,
+        lpf_order: usize,
+        lpf_hz: f64,
+        rtol: f64,
+    ) -> anyhow::Result<sim::Simulated> {
         let fe = FrontEnd {
             lpf_order,
             lpf_hz,
+            rtol,
             noise_pm_rthz: self.device.noise_pm_rthz,
             seed: self.seed,
             ..FrontEnd::default()
@@ -233,6 +240,8 @@ pub struct GenOptions {
     pub lpf: (usize, f64),
     /// V_A0 of the headers, V.
     pub pump_amp_ref_v: f64,
+    /// The integrator's relative tolerance.
+    pub rtol: f64,
 }
 
 /// What a run did.
@@ -256,6 +265,11 @@ pub fn generate(
 ) -> anyhow::Result<GenReport> {
     anyhow::ensure!(opts.n > 0, "--n must be at least 1");
     anyhow::ensure!(
+        opts.rtol.is_finite() && (1e-13..=1e-4).contains(&opts.rtol),
+        "--rtol {} must be in [1e-13, 1e-4]",
+        opts.rtol
+    );
+    anyhow::ensure!(
         opts.duration_s.is_finite() && opts.duration_s >= 0.01,
         "--duration-s {} must be at least 0.01 s",
         opts.duration_s
@@ -278,7 +292,7 @@ pub fn generate(
         .par_iter()
         .map(|d| {
             let t = Instant::now();
-            let s = d.simulate(order, hz)?;
+            let s = d.simulate(order, hz, opts.rtol)?;
             let path = dir.join(&d.file);
             format::write(&path, &d.header(order, hz), &s.rows)?;
             let secs = t.elapsed().as_secs_f64();

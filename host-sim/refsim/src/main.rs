@@ -42,6 +42,10 @@ enum Cmd {
         /// V_A0, the pump amplitude at which s = 1 (header `pump_amp_ref_v`), V.
         #[arg(long, default_value_t = 1.0)]
         pump_amp_ref_v: f64,
+        /// Relative tolerance of the integrator (1e-9: ~1e-6 µm, a tenth of one sample's
+        /// noise; the cost goes as rtol^(-1/5)).
+        #[arg(long, default_value_t = 1e-9)]
+        rtol: f64,
         /// Worker threads (0: all cores).
         #[arg(long, default_value_t = 0)]
         jobs: usize,
@@ -58,6 +62,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             lpf_order,
             lpf_hz,
             pump_amp_ref_v,
+            rtol,
             jobs,
         } => {
             anyhow::ensure!(
@@ -84,6 +89,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 duration_s,
                 lpf: (lpf_order, lpf_hz),
                 pump_amp_ref_v,
+                rtol,
             };
             let rep = generate::generate(&opts, &out, &|m| eprintln!("{m}"))?;
             eprintln!(

@@ -20,6 +20,7 @@ fn opts(n: usize, seed: u64) -> GenOptions {
         duration_s: 0.4,
         lpf: (4, 150.0),
         pump_amp_ref_v: 1.0,
+        rtol: 1e-9,
     }
 }
 
