@@ -83,8 +83,9 @@
 //! identification has settled at least once since start-up and since the drive last lost
 //! its lock, no change of the device
 //! is pending (the slow θ the row relies on are being re-identified), the fast row is
-//! solvable (|A1| above the lock threshold), the drive amplitude is steady (|A1|² at
-//! least [`DRIVE_STEADY2`] of its slow mean: not ringing down), the narrow channel's
+//! solvable (|A1| above the lock threshold), the drive is not ringing down (|A1|² has not
+//! fallen below [`DRIVE_RING2`] of its slow mean, or it has come back above
+//! [`DRIVE_STEADY2`] of it for [`RING_HOLD`] samples since), the narrow channel's
 //! quadrature agrees with the slow θ23 to `rate.gate_dev_dps` (a change of the device
 //! moves the quadrature at once, while the change detector needs a few samples, and the
 //! rate gate holds the detector while the rate moves: without this test `drift-retune`
@@ -423,21 +424,34 @@ pub struct RateEstimate<T> {
     pub quad: T,
     /// The fast row was solved at this sample (else the last values are held).
     pub solved: bool,
-    /// The drive amplitude is steady: |A1|² ≥ [`DRIVE_STEADY2`] × its slow mean (a drive
-    /// ringing down makes the row given the slow θ wrong).
+    /// The drive amplitude is steady: not ringing down ([`DRIVE_RING2`]; a drive ringing
+    /// down makes the row given the slow θ wrong).
     pub steady: bool,
 }
 
-/// The floor of |A1|² relative to its slow mean (memory of the slow RLS) above which
-/// the drive counts as steady: amplitude ≥ half its mean. The pump dither alone moves the
-/// amplitude by about ±30 % (1.2–2.1 µm about 1.7 µm in `rate-response`'s base
-/// scenario), so only a deep fall is caught: when the dithers push the drive out of its
-/// parametric band it rings down (`characterise`: |x1| to 0.2–1.3 µm), and the fast row,
-/// given the slow θ, then read 138–169 °/s at a true 150 (issue 10's note on the
-/// diagnosis clash). Where the 5 Hz and 1.3 Hz dithers' phases meet, the amplitude dips
-/// below half its mean for ≈ 40 ms at a time: the rate is flagged invalid there, on ≈ 3 %
-/// of the samples of `warm-up`'s device (host-sim/docs/benchmarks.md).
+/// The floor of |A1|² relative to its slow mean (memory of the slow RLS) to which a drive
+/// that rang down must come back, and stay above for [`RING_HOLD`] samples, before it
+/// counts as steady again (amplitude ≥ half its mean).
 pub const DRIVE_STEADY2: f64 = 0.25;
+
+/// The depth of |A1|² relative to its slow mean below which the drive is ringing down
+/// (amplitude below ≈ 32 % of its mean). The pump dither alone moves the amplitude by about
+/// ±30 % (1.2–2.1 µm about 1.7 µm in `rate-response`'s base scenario), and where the 5 Hz
+/// and 1.3 Hz dithers' phases meet it dips for ≈ 40 ms to 0.17–0.23 of its mean square
+/// (0.115 at the deepest, `characterise` seed 25); the row stays right there (the rate's
+/// error on those samples 0.31 °/s rms against 0.24 elsewhere, `warm-up`). When the dithers
+/// push the drive out of its parametric band it rings down (`characterise` from 14 s: |x1|
+/// to 0.2–1.3 µm and below) and falls through this depth; the fast row, given the slow θ,
+/// is right on the way down (within 0.9 °/s) but wrong at the bottom and while the drive
+/// re-locks (up to 30 °/s off): from this depth on the rate is flagged invalid until the
+/// amplitude is back above [`DRIVE_STEADY2`] of its mean for [`RING_HOLD`] samples.
+pub const DRIVE_RING2: f64 = 0.1;
+
+/// Samples (50 ms at 500 Hz) the drive must stay above [`DRIVE_STEADY2`] after a
+/// ring-down before it counts as steady: while it re-locks its amplitude jumps back above
+/// the floor for a sample or two (a valid sample 5.3 °/s off without the hold,
+/// `characterise` seed 25 at 17.246 s).
+pub const RING_HOLD: u32 = 25;
 
 /// The rate's zero is updated once in this many samples (the estimator's decision
 /// interval: it takes a phase of it that no decision, no thermal block falls on, so the
@@ -461,6 +475,10 @@ pub struct RateState<T> {
     primed: bool,
     /// Slow mean of |A1|² over solved samples (the steadiness test).
     amp2_slow: T,
+    /// Samples still to wait before the drive counts as steady again: set to
+    /// [`RING_HOLD`] while |A1|² is below [`DRIVE_STEADY2`] of its slow mean after it fell
+    /// below [`DRIVE_RING2`] of it (a ring-down), counted down on samples above.
+    ring_hold: u32,
     /// The slow RLS is gated until this sample (the rate moved).
     gate_until: u64,
     /// Samples of the current hold that the narrow channel's rate has been still for.
@@ -632,6 +650,7 @@ impl<T: Real> RateState<T> {
         self.est.solved = solvable;
         if !solvable {
             self.est.steady = false;
+            self.ring_hold = RING_HOLD;
             self.quad_ok = false;
             return;
         }
@@ -642,8 +661,17 @@ impl<T: Real> RateState<T> {
             self.post = PostState::at_rest(gamma);
         }
         self.primed = true;
-        let band = T::from_f64(DRIVE_STEADY2);
-        let steady = a2 >= band * self.amp2_slow;
+        // the common path (no ring-down) is one product and one comparison
+        if a2 < T::from_f64(DRIVE_RING2) * self.amp2_slow {
+            self.ring_hold = RING_HOLD;
+        } else if self.ring_hold > 0 {
+            if a2 < T::from_f64(DRIVE_STEADY2) * self.amp2_slow {
+                self.ring_hold = RING_HOLD;
+            } else {
+                self.ring_hold -= 1;
+            }
+        }
+        let steady = self.ring_hold == 0;
         self.amp2_slow += d.alpha_slow * (a2 - self.amp2_slow);
         self.est.steady = steady;
         self.gamma_cpl = gamma_c;

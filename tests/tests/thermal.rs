@@ -51,7 +51,7 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
         .collect();
     let valid = valid_share(&r, 5.0, 25.0);
     assert!(
-        valid >= 0.95,
+        valid >= 0.99,
         "rate valid on {:.1} % of the ramp",
         100.0 * valid
     );
@@ -290,9 +290,8 @@ fn the_thermal_report_reads_the_warm_up() {
 /// The targets on the 10 K warm-up over 40 s, at −30/−33 ppm/K and with equal
 /// TCFs (−30/−30), the die temperature in the samples: no covariance reset after the
 /// start-up, the rate's error rms during the ramp ≤ 1.2× its rms before it, and the sense
-/// amplitude ≥ 98 % of the oracle twin's (pump at 2·f_y) at every second. The rate valid
-/// on ≥ 95 % of the ramp: the 99 % is not met (96.8–97.0 %: the drive-steadiness
-/// gate at the dithers' dips, as at a constant temperature; host-sim/docs/benchmarks.md).
+/// amplitude ≥ 98 % of the oracle twin's (pump at 2·f_y) at every second, and the rate
+/// valid on ≥ 99 % of the ramp.
 #[test]
 fn a_40_s_warm_up_holds_the_rate_at_both_tcfs() {
     for tcf_wy in [-33.0, -30.0] {
@@ -314,7 +313,7 @@ fn a_40_s_warm_up_holds_the_rate_at_both_tcfs() {
             rep.sense_amp_vs_oracle_min
         );
         assert_eq!(rep.resets_after_startup, 0, "{what}");
-        assert!(rep.valid_during >= 0.95, "{what}");
+        assert!(rep.valid_during >= 0.99, "{what}");
         assert!(ratio <= 1.2, "{what}");
         assert!(
             rep.sense_amp_vs_oracle_min.expect("whole seconds") >= 0.98,
