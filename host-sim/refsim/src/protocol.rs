@@ -43,6 +43,17 @@ pub struct Reversal {
     pub ramp_s: f64,
 }
 
+/// A sine added to the rate from `t_s` on: `amplitude_dps·sin(2π·freq_hz·(t − t_s))`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RateSine {
+    /// Start, s.
+    pub t_s: f64,
+    /// Amplitude, °/s.
+    pub amplitude_dps: f64,
+    /// Frequency, Hz.
+    pub freq_hz: f64,
+}
+
 /// The drawn protocol of one record (labels' `protocol`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Protocol {
@@ -69,6 +80,9 @@ pub struct Protocol {
     /// The rate-table reversal, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reversal: Option<Reversal>,
+    /// A sine added to the rate, if any (not drawn; for comparisons).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_sine: Option<RateSine>,
     /// Mean accelerations, m/s².
     pub accel_mps2: [f64; 2],
     /// Acceleration wobble: amplitude, m/s² (both axes, in phase quadrature).
@@ -116,6 +130,7 @@ impl Protocol {
             scale_steps: Vec::new(),
             rate_dps,
             reversal: None,
+            rate_sine: None,
             accel_mps2: accel,
             accel_wobble_mps2: 0.0,
             accel_wobble_hz: 0.0,
@@ -174,6 +189,7 @@ impl Protocol {
             scale_steps,
             rate_dps,
             reversal,
+            rate_sine: None,
             accel_mps2,
             accel_wobble_mps2,
             accel_wobble_hz,
@@ -243,6 +259,19 @@ impl Protocol {
 
     /// The rate (°/s) and its derivative (°/s²) at `t`.
     pub fn rate_dps(&self, t: f64) -> (f64, f64) {
+        let (r, rd) = self.table_rate_dps(t);
+        match self.rate_sine {
+            Some(v) if t > v.t_s => {
+                let w = TAU * v.freq_hz;
+                let (sn, cs) = (w * (t - v.t_s)).sin_cos();
+                (r + v.amplitude_dps * sn, rd + v.amplitude_dps * w * cs)
+            }
+            _ => (r, rd),
+        }
+    }
+
+    /// The rate table's part of the rate: the drawn rate and its reversal.
+    fn table_rate_dps(&self, t: f64) -> (f64, f64) {
         let r = self.rate_dps;
         match self.reversal {
             Some(v) if t > v.t_s => {

@@ -4,7 +4,7 @@
 
 use paragyro_refsim::device::DeviceDraw;
 use paragyro_refsim::effects::EffectSizes;
-use paragyro_refsim::protocol::{Protocol, Table};
+use paragyro_refsim::protocol::{Protocol, RateSine, Table};
 use paragyro_refsim::sim::{FrontEnd, simulate};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::scenario::Scenario;
@@ -15,7 +15,25 @@ fn compare(duration_s: f64, skip: usize, rtol: f64) -> (f64, f64, [f64; 14]) {
 }
 
 fn compare_spp(duration_s: f64, skip: usize, rtol: f64, spp: usize) -> (f64, f64, [f64; 14]) {
-    let mut sc = Scenario::load("characterise").unwrap();
+    compare_with(
+        Scenario::load("characterise").unwrap(),
+        None,
+        duration_s,
+        skip,
+        rtol,
+        spp,
+    )
+}
+
+/// The comparison on `sc` (its plant at rest, its rate plus `sine`).
+fn compare_with(
+    mut sc: Scenario,
+    sine: Option<RateSine>,
+    duration_s: f64,
+    skip: usize,
+    rtol: f64,
+    spp: usize,
+) -> (f64, f64, [f64; 14]) {
     sc.sim.steps_per_period = spp;
     sc.duration_s = duration_s;
     sc.sim.noise_pm_rthz = 0.0;
@@ -38,6 +56,7 @@ fn compare_spp(duration_s: f64, skip: usize, rtol: f64, spp: usize) -> (f64, f64
         [sc.plant.accel_x_mps2, sc.plant.accel_y_mps2],
     );
     proto.table = Some(table);
+    proto.rate_sine = sine;
     let fe = FrontEnd {
         noise_pm_rthz: 0.0,
         rtol,
@@ -77,6 +96,31 @@ fn a_clean_record_is_the_simulators() {
     let (dmax, _, _) = compare(1.5, 0, 1e-9);
     eprintln!("128 steps: largest difference {dmax:.3e} µm");
     assert!(dmax < 1e-4, "{dmax:.3e} µm");
+}
+
+/// A moving rate (Ω and Ω̇ in every rate term): `characterise` with a sine of ±250 °/s at
+/// 1 Hz on its 150 °/s (the rate goes through zero to −100 °/s, as a rate table reversing;
+/// Ω̇ up to 1571 °/s²), the simulator's event `rate_sine` (θ held at each interval's
+/// midpoint) against this generator's continuous Ω(t), on the simulator's 256-step grid.
+#[test]
+fn a_moving_rate_is_the_simulators() {
+    let text = include_str!("../../scenarios/characterise.toml");
+    let text = format!(
+        "{text}\n[[event]]\nt_s = 0.0\nkind = \"rate_sine\"\namplitude_dps = 250.0\nfreq_hz = 1.0\nduration_s = 10.0\n"
+    );
+    let sc = Scenario::from_toml_str(&text, "characterise + rate sine").unwrap();
+    let sine = RateSine {
+        t_s: 0.0,
+        amplitude_dps: 250.0,
+        freq_hz: 1.0,
+    };
+    let (dmax, amax, _) = compare_with(sc.clone(), Some(sine), 1.5, 0, 1e-9, 256);
+    eprintln!("rate sine: largest difference {dmax:.3e} µm of {amax:.3} µm");
+    // the same records without the sine on this side differ by the Coriolis response
+    let (moved, _, _) = compare_with(sc, None, 1.5, 0, 1e-9, 256);
+    eprintln!("without the sine here: {moved:.3e} µm");
+    assert!(moved > 0.1, "{moved}");
+    assert!(dmax < 2e-5, "{dmax:.3e} µm");
 }
 
 /// The numbers of the README: the difference against the simulator's grid and this
