@@ -115,8 +115,12 @@ fn draw_effect(rng: &mut impl Rng, e: Effect) -> EffectSpec {
 /// The out-of-library types drawn: the blind benchmark's four and the simulator's two.
 const OUTSIDE_TYPES: usize = 6;
 
-/// Draws the labels of `n` records of `duration_s` from `seed`.
-pub fn draw(n: usize, seed: u64, duration_s: f64) -> Vec<Draw> {
+/// The share of records with a rate-table reversal, by default.
+pub const REVERSAL_SHARE: f64 = 0.4;
+
+/// Draws the labels of `n` records of `duration_s` from `seed`, a share `reversal_share`
+/// of them with a rate-table reversal.
+pub fn draw(n: usize, seed: u64, duration_s: f64, reversal_share: f64) -> Vec<Draw> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x0e5f_51a0_7e11_ab1e);
     (0..n)
         .map(|i| {
@@ -163,6 +167,7 @@ pub fn draw(n: usize, seed: u64, duration_s: f64) -> Vec<Draw> {
                 device.rate_dps,
                 device.accel_mps2,
                 temp_rise_k,
+                reversal_share,
             );
             Draw {
                 id: format!("{i:04}"),
@@ -242,6 +247,8 @@ pub struct GenOptions {
     pub pump_amp_ref_v: f64,
     /// The integrator's relative tolerance.
     pub rtol: f64,
+    /// The share of records with a rate-table reversal.
+    pub reversal_share: f64,
 }
 
 /// What a run did.
@@ -281,7 +288,12 @@ pub fn generate(
         std::fs::remove_file(&labels_path)
             .with_context(|| format!("cannot remove the old {}", labels_path.display()))?;
     }
-    let mut draws = draw(opts.n, opts.seed, opts.duration_s);
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&opts.reversal_share),
+        "--reversal-share {} must be in [0, 1]",
+        opts.reversal_share
+    );
+    let mut draws = draw(opts.n, opts.seed, opts.duration_s, opts.reversal_share);
     for d in &mut draws {
         d.protocol.pump_amp_ref_v = opts.pump_amp_ref_v;
     }

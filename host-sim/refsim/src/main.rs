@@ -46,6 +46,9 @@ enum Cmd {
         /// noise; the cost goes as rtol^(-1/5)).
         #[arg(long, default_value_t = 1e-9)]
         rtol: f64,
+        /// Share of the records with a rate-table reversal.
+        #[arg(long, default_value_t = 0.4)]
+        reversal_share: f64,
         /// Worker threads (0: all cores).
         #[arg(long, default_value_t = 0)]
         jobs: usize,
@@ -63,6 +66,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             lpf_hz,
             pump_amp_ref_v,
             rtol,
+            reversal_share,
             jobs,
         } => {
             anyhow::ensure!(
@@ -90,6 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 lpf: (lpf_order, lpf_hz),
                 pump_amp_ref_v,
                 rtol,
+                reversal_share,
             };
             let rep = generate::generate(&opts, &out, &|m| eprintln!("{m}"))?;
             eprintln!(

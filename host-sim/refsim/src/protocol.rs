@@ -142,7 +142,8 @@ impl Protocol {
     }
 
     /// Draws a protocol of `duration_s` for a device whose pump centre is
-    /// `pump_centre_hz`, at `rate_dps` and `accel_mps2` (the device draw's).
+    /// `pump_centre_hz`, at `rate_dps` and `accel_mps2` (the device draw's), with a
+    /// rate-table reversal with probability `reversal_share`.
     pub fn draw(
         rng: &mut impl Rng,
         duration_s: f64,
@@ -150,6 +151,7 @@ impl Protocol {
         rate_dps: f64,
         accel_mps2: [f64; 2],
         temp_rise_k: f64,
+        reversal_share: f64,
     ) -> Self {
         let d = duration_s;
         let mut u = |a: f64, b: f64| a + (b - a) * rng.random::<f64>();
@@ -170,7 +172,7 @@ impl Protocol {
                 ramp_s: u(0.1, 0.3),
             },
         ];
-        let reversal = (u(0.0, 1.0) < 0.4).then(|| Reversal {
+        let reversal = (u(0.0, 1.0) < reversal_share).then(|| Reversal {
             t_s: u(0.35, 0.65) * d,
             ramp_s: u(0.2, 1.0).min(0.2 * d),
         });
@@ -318,7 +320,7 @@ mod tests {
     fn drawn_dithers_are_in_range() {
         let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(9);
         for _ in 0..100 {
-            let p = Protocol::draw(&mut rng, 20.0, 21_884.0, 50.0, [1.0, 2.0], 4.0);
+            let p = Protocol::draw(&mut rng, 20.0, 21_884.0, 50.0, [1.0, 2.0], 4.0, 0.4);
             assert!((2.0..=6.0).contains(&p.dither_freq_hz));
             let s_min = (0..=p.intervals())
                 .map(|k| p.pump_scale(p.t(k)))

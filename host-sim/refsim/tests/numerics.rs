@@ -5,7 +5,7 @@ use paragyro_refsim::generate::draw;
 use paragyro_refsim::sim::{FrontEnd, simulate};
 
 fn run(duration_s: f64, rtol: f64, control_lockin: bool) -> (Vec<[f64; 14]>, u64, f64) {
-    let d = &draw(1, 3, duration_s)[0];
+    let d = &draw(1, 3, duration_s, 0.4)[0];
     let fe = FrontEnd {
         noise_pm_rthz: 0.0,
         rtol,

@@ -21,6 +21,7 @@ fn opts(n: usize, seed: u64) -> GenOptions {
         lpf: (4, 150.0),
         pump_amp_ref_v: 1.0,
         rtol: 1e-9,
+        reversal_share: 0.4,
     }
 }
 
@@ -96,7 +97,7 @@ fn the_generator_is_deterministic() {
 /// within their ranges, the thermal drift negative, the softening pump-driven.
 #[test]
 fn draws_have_the_blind_benchmarks_proportions() {
-    let draws = draw(2000, 3, 20.0);
+    let draws = draw(2000, 3, 20.0, 0.4);
     let share = |c: Category| draws.iter().filter(|d| d.category == c).count() as f64 / 2000.0;
     let want = [
         SHARES[0],
