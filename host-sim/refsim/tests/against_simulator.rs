@@ -7,7 +7,7 @@ use paragyro_refsim::effects::EffectSizes;
 use paragyro_refsim::protocol::{Protocol, RateSine, Table};
 use paragyro_refsim::sim::{FrontEnd, simulate};
 use paragyro_simulator::lockin::LockinExt;
-use paragyro_simulator::scenario::Scenario;
+use paragyro_simulator::scenario::{EventKind, EventSpec, Scenario};
 
 /// The largest channel difference, µm, over rows after `skip`, and the largest |channel|.
 fn compare(duration_s: f64, skip: usize, rtol: f64) -> (f64, f64, [f64; 14]) {
@@ -104,11 +104,13 @@ fn a_clean_record_is_the_simulators() {
 /// midpoint) against this generator's continuous Ω(t), on the simulator's 256-step grid.
 #[test]
 fn a_moving_rate_is_the_simulators() {
-    let text = include_str!("../../scenarios/characterise.toml");
-    let text = format!(
-        "{text}\n[[event]]\nt_s = 0.0\nkind = \"rate_sine\"\namplitude_dps = 250.0\nfreq_hz = 1.0\nduration_s = 10.0\n"
-    );
-    let sc = Scenario::from_toml_str(&text, "characterise + rate sine").unwrap();
+    let mut sc = Scenario::load("characterise").unwrap();
+    let kind = EventKind::RateSine {
+        amplitude_dps: 250.0,
+        freq_hz: 1.0,
+        duration_s: 10.0,
+    };
+    sc.events.insert(0, EventSpec { t_s: 0.0, kind });
     let sine = RateSine {
         t_s: 0.0,
         amplitude_dps: 250.0,
