@@ -356,14 +356,21 @@ impl Scenario {
         }
     }
 
-    /// Whether the scenario moves the rate with a `rate_sine` or `rate_chirp` (the
-    /// closed loop then holds θ over each sample interval at its midpoint, not its start:
-    /// the held rate has no half-sample delay against the continuous one).
+    /// Whether the scenario moves the rate with a `rate_sine`, a `rate_chirp` or a `ramp`
+    /// of `rate_dps` (the closed loop then holds θ over each sample interval at its
+    /// midpoint, not its start: the held rate has no half-sample delay against the
+    /// continuous one, as a real rate table's is not, and as the diagnosis re-simulates a
+    /// record's `rate_ref_dps`).
     pub fn has_rate_profile(&self) -> bool {
         self.events.iter().any(|e| {
             matches!(
                 e.kind,
-                EventKind::RateSine { .. } | EventKind::RateChirp { .. }
+                EventKind::RateSine { .. }
+                    | EventKind::RateChirp { .. }
+                    | EventKind::Ramp {
+                        param: PlantParam::RateDps,
+                        ..
+                    }
             )
         })
     }

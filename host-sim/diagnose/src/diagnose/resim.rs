@@ -403,7 +403,14 @@ impl Resim<'_> {
                 break;
             }
             phys.gamma = match (rate_ref, gamma) {
-                (Some(rr), _) => gpd * rr[k] + model.gamma_offset,
+                // θ held over the interval at its midpoint, with the table's angular
+                // acceleration γ′ = Ω′/ω0² (the simulator's convention for a moving rate,
+                // `runner`): a reversal's ramp is then part of the model, not a gap
+                (Some(rr), _) => {
+                    let (r0, r1) = (rr[k], rr[k + 1]);
+                    phys.gamma_p = ((r1 - r0) * h.fs_hz).to_radians() / (omega0 * omega0);
+                    gpd * 0.5 * (r0 + r1) + model.gamma_offset
+                }
                 (None, Some(g)) => g,
                 (None, None) => model.phys.gamma,
             };
