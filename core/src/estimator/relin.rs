@@ -20,6 +20,13 @@
 //! walk, that tick would be the loop's costliest, beyond what the loop test allows above
 //! the mean (`cargo fw-loop`).)
 //!
+//! The trigger waits for phase 1 or 2 of the 25-sample decision interval (`step.rs`): the
+//! parts then fall on phases 2–6 and the nominal's refresh in the rate channel on the tick
+//! after the swap, none on the decision's tick (phase 0, with the thermal block every other
+//! interval) or the rate's zero and lead (phases 8 and 16). Triggered on any phase, the
+//! θ̂1 sums (≈ 840 instructions of soft-float) can meet a decision's tick, and that tick
+//! then exceeds the loop's budget for the largest tick.
+//!
 //! The new point is the estimate of tick k; at the swap the RLS keeps what it learnt
 //! since (x − x_captured instead of 0), so θ_nom + sc·x is the same before and after
 //! the swap (up to rounding), exactly as the one-tick version keeps it. The ticks
@@ -53,16 +60,18 @@ pub(crate) struct Relin<T> {
 
 impl<T: Real> State<T> {
     /// One tick of the spread re-linearisation (module docs): triggers on an updated
-    /// tick every `relin_every` samples with a moderate deviation, else does the next
-    /// part of the one in progress.
+    /// tick every `relin_every` samples with a moderate deviation, on a phase of the
+    /// decision interval that lets its parts miss the decision's and the rate's ticks
+    /// (`trigger_phase`), else does the next part of the one in progress.
     #[inline(always)]
-    pub(crate) fn relin_tick(&mut self, d: &Design<T>, k: u64, updated: bool) {
+    pub(crate) fn relin_tick(&mut self, d: &Design<T>, k: u64, updated: bool, trigger_phase: bool) {
         let f = &d.fit;
         match self.lin.pending.phase {
             0 => {
                 let relin_every = f.relin_every;
                 if relin_every > 0
                     && updated
+                    && trigger_phase
                     && k >= self.lin.last_relin + relin_every
                     && self.deviation_moderate()
                 {
@@ -147,27 +156,28 @@ mod tests {
         assert!(s.rls1.set_estimate(x1) && s.rls2.set_estimate(x2));
         let k = s.lin.last_relin + every;
         let (t1_trigger, t2_trigger) = s.theta(d);
-        // not yet due, or not an updated tick: nothing starts
-        s.relin_tick(d, k - 1, true);
-        s.relin_tick(d, k, false);
+        // not yet due, not an updated tick, or not a trigger phase: nothing starts
+        s.relin_tick(d, k - 1, true, true);
+        s.relin_tick(d, k, false, true);
+        s.relin_tick(d, k, true, false);
         assert_eq!(s.lin.pending.phase, 0);
-        s.relin_tick(d, k, true);
+        s.relin_tick(d, k, true, true);
         assert_eq!((s.lin.pending.phase, s.lin.last_relin), (1, k));
         // the RLS moves on between trigger and swap
         let mut x1b = x1;
         x1b[3] += 0.005;
         assert!(s.rls1.set_estimate(x1b));
-        s.relin_tick(d, k + 1, true);
-        s.relin_tick(d, k + 2, true);
-        s.relin_tick(d, k + 3, true);
+        s.relin_tick(d, k + 1, true, true);
+        s.relin_tick(d, k + 2, true, true);
+        s.relin_tick(d, k + 3, true, true);
         assert_eq!(s.lin.pending.phase, 4);
         assert_eq!(s.lin.relins, 0);
         let (b1, b2) = s.theta(d);
         // a held (not updated) tick leaves the swap pending and θ̂ bit for bit
-        s.relin_tick(d, k + 4, false);
+        s.relin_tick(d, k + 4, false, true);
         assert_eq!((s.lin.pending.phase, s.lin.relins), (4, 0));
         assert_eq!(s.theta(d), (b1, b2));
-        s.relin_tick(d, k + 4, true);
+        s.relin_tick(d, k + 4, true, true);
         assert_eq!((s.lin.pending.phase, s.lin.relins), (0, 1));
         let (a1, a2) = s.theta(d);
         for (b, a) in b1.iter().chain(b2.iter()).zip(a1.iter().chain(a2.iter())) {

@@ -91,7 +91,7 @@ impl<T: Real> State<T> {
         }
         let wy2 = self.wy2_fast(d);
         let settled = self.settle(d, k, gated, updated, wy2, &mut events);
-        self.maybe_relinearize(d, k, updated);
+        self.maybe_relinearize(d, k, updated, phase);
         if block {
             self.thermal_block(d, k);
         }
@@ -435,10 +435,11 @@ impl<T: Real> State<T> {
     }
 
     /// Stage 5b: every `rls.relinearize_s` of updates, the linearisation point moves to
-    /// a moderate estimate, spread over five ticks (`relin.rs`).
+    /// a moderate estimate, spread over five ticks from phase 1 or 2 of the decision
+    /// interval (`relin.rs`).
     #[inline(always)]
-    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool) {
-        self.relin_tick(d, k, updated);
+    fn maybe_relinearize(&mut self, d: &Design<T>, k: u64, updated: bool, phase: u32) {
+        self.relin_tick(d, k, updated, phase.wrapping_sub(1) < 2);
     }
 
     /// Stage 5c: the health of this sample's estimate (the supervisor's lock and ramp
