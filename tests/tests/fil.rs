@@ -307,29 +307,45 @@ fn the_dds_words_are_what_the_firmware_path_adds_to_the_rate() {
 }
 
 /// A 10 K warm-up over 20 s (host-sim/scenarios/warm-up.toml at 4 g): the firmware takes the
-/// die temperature from the accelerometer's burst and the core follows the drift without a
-/// covariance reset after the start-up, the rate's health on ≥ 95 % of the ramp, the pump
-/// centre within 2.5 Hz of twice the sense resonance through the ramp and at the end (the
-/// verdict, `paragyro_fil::warm_up`).
-///
-/// Ignored: the core does not hold it yet. Measured (`cargo run --release -p paragyro-fil
-/// -- warm-up`, seed 1, `summary.json` `warm_up`): in the loop 1 drive and 2 sense resets
-/// after the start-up, the rate's health on 96.4 % of the ramp, the pump within 1.99 Hz of
-/// 2·f_y; its host-only loop 0 resets, the rate valid on 96.8 %, the pump within 1.95 Hz.
+/// die temperature from the accelerometer's burst (the chip model adds the scenario's
+/// sensor noise) and the core follows the drift without a covariance reset after the
+/// start-up, the rate's health on ≥ 99 % of the ramp, the pump centre within 0.5 Hz of
+/// twice the sense resonance through the ramp and at the end (the tracking's dead band is
+/// 0.25 Hz). Measured (`cargo run --release -p paragyro-fil -- warm-up`, seed 1,
+/// `summary.json` `warm_up`): 0 resets, health on 100 % of the ramp, the pump within
+/// 0.23 Hz. The tick budget is not asserted here: see the next test.
 #[test]
-#[ignore = "the core still resets in the loop's warm-up (1 + 2 resets on seed 1): see the doc comment"]
 fn a_warm_up_is_followed_without_resets_in_the_loop() {
     if skip() {
         return;
     }
     let s = run(&paragyro_fil::warm_up().unwrap(), BoardPump::HalfSteps);
-    assert_pass(&s);
+    assert!(s.pass, "{}: {:?}", s.scenario, s.failures);
+    assert_eq!(s.exit_code, Some(0));
+    assert_eq!(s.dds_unlocked_ticks, 0);
     let w = s.warm_up.as_ref().expect("the warm-up's figures");
     assert_eq!((w.resets_drive_after, w.resets_sense_after), (0, 0));
-    assert!(w.rate_health_share >= 0.95, "{w:?}");
-    assert!(w.pump_offset_end_hz.abs() <= 2.5, "{w:?}");
-    assert!(w.pump_offset_max_ramp_hz <= 2.5, "{w:?}");
+    assert!(w.rate_health_share >= 0.99, "{w:?}");
+    assert!(w.pump_offset_end_hz.abs() <= 0.5, "{w:?}");
+    assert!(w.pump_offset_max_ramp_hz <= 0.5, "{w:?}");
     // the pump had twice the sense resonance's 7.2 Hz fall to follow
     assert!(w.pump_target_move_hz < -7.0, "{w:?}");
     assert_eq!((s.ticks, s.bad_ticks), (13501, 0));
+}
+
+/// The warm-up within the tick budget (mean 12 000, max 15 000 instructions, exact).
+///
+/// Ignored: not met. Measured (`cargo run --release -p paragyro-fil -- warm-up`,
+/// `summary.json` `instr_mean`, `instr_max`): mean 12 643, max 15 220. Under a continuous
+/// drift every tick updates both RLS (no gated stretch as in `fw-drift-retune`, whose mean
+/// the README's budget row quotes) and the pump's tracking ramps write the DDS
+/// (`firmware/scripts/fil-profile.sh warm-up`: RLS 3 772, drivers 786 per tick).
+#[test]
+#[ignore = "not met: mean 12 643 > 12 000 and max 15 220 > 15 000 instructions in the warm-up"]
+fn a_warm_up_stays_within_the_tick_budget_in_the_loop() {
+    if skip() {
+        return;
+    }
+    let s = run(&paragyro_fil::warm_up().unwrap(), BoardPump::HalfSteps);
+    assert_pass(&s);
 }

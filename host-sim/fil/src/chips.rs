@@ -53,6 +53,8 @@ pub struct SensorChips {
     range: Range,
     faults: Faults,
     held_accel: Option<[u8; ACCEL_BURST]>,
+    /// The temperature sensor's white noise, K rms ([`SensorChips::with_temp_noise`]).
+    temp_noise_k: f64,
     rng: rand_xoshiro::Xoshiro256PlusPlus,
 }
 
@@ -66,8 +68,22 @@ impl SensorChips {
             range,
             faults,
             held_accel: None,
+            temp_noise_k: 0.0,
             rng: rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xADC1_355A),
         }
+    }
+
+    /// The temperature sensor's white noise, K rms, added to the die temperature before it
+    /// is coded (the scenario's `[temperature] sensor_noise_k`; 0, the default, draws no
+    /// random number, so a run without it keeps the accelerometer's noise sequence).
+    #[must_use]
+    pub fn with_temp_noise(mut self, k_rms: f64) -> Self {
+        self.temp_noise_k = if k_rms.is_finite() {
+            k_rms.max(0.0)
+        } else {
+            0.0
+        };
+        self
     }
 
     /// The two ADC frames of tick `k` for the 14 lock-in channels (µm, drive then sense).
@@ -101,7 +117,8 @@ impl SensorChips {
     }
 
     /// The STATUS..ZDATA1 burst of tick `k` for X, Y in m/s² (Z: 1 g), with the device's
-    /// noise, and the die temperature `temp_c` in TEMP2, TEMP1 ([`temp_registers`]).
+    /// noise, and the die temperature `temp_c` with the sensor's noise
+    /// ([`SensorChips::with_temp_noise`]) in TEMP2, TEMP1 ([`temp_registers`]).
     pub fn accel_burst(
         &mut self,
         k: usize,
@@ -113,6 +130,13 @@ impl SensorChips {
         let noise = Normal::new(0.0, ACCEL_NOISE_MPS2).expect("a finite, positive σ");
         let mut b = [0u8; ACCEL_BURST];
         b[0] = XL_DATA_RDY;
+        let temp_c = match temp_c {
+            Some(c) if self.temp_noise_k > 0.0 => {
+                let n: f64 = rand_distr::StandardNormal.sample(&mut self.rng);
+                Some(c + self.temp_noise_k * n)
+            }
+            other => other,
+        };
         b[2..4].copy_from_slice(&temp_registers(temp_c));
         for (i, a) in [ax, ay, f64::from(STANDARD_GRAVITY_MPS2)]
             .into_iter()

@@ -236,11 +236,10 @@ pub const WARM_UP_TOML: &str = include_str!("../../scenarios/warm-up.toml");
 /// of twice the sense resonance through the ramp and at 35 °C at the end (the retune's
 /// dead band is 2 Hz; the host's `paragyro-sim thermal` on seed 1: 2.01 Hz at most).
 ///
-/// The two loops' temperatures differ: the host-only loop's samples carry the simulator's
-/// sensor (every sample, 0.05 K rms of noise, rounded to 1/9.05 K), the loop's the chip's
-/// nearest code of the profile without noise, taken every 50th tick and held 0.1 s (the
-/// chip model does not read `sensor`, `sensor_lsb_k`, `sensor_noise_k`). The verdict fails
-/// today (the core resets through the ramp: tests/tests/fil.rs).
+/// The two loops' temperatures: the host-only loop's samples carry the simulator's sensor
+/// (every sample, `sensor_noise_k` of white noise, rounded to `sensor_lsb_k`), the loop's
+/// the chip's nearest code of the profile plus the same white noise (`SensorChips::
+/// with_temp_noise`), read every 50th tick and held 0.1 s.
 pub fn warm_up() -> anyhow::Result<LoopScenario> {
     let mut scenario = Scenario::from_toml_str(WARM_UP_TOML, "host-sim/scenarios/warm-up.toml")
         .map_err(|e| anyhow::anyhow!("{e}"))?;

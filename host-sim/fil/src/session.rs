@@ -417,7 +417,12 @@ pub fn run(opts: &Options) -> anyhow::Result<Session> {
     let accel_si = L0_M * w0 * w0;
     let events = sc.control_events();
     let mut next_ev = 0usize;
-    let mut chips = SensorChips::new(UM_PER_VOLT, Range::G8, opts.faults, seed);
+    let mut chips = SensorChips::new(UM_PER_VOLT, Range::G8, opts.faults, seed).with_temp_noise(
+        sc.temperature
+            .as_ref()
+            .filter(|t| t.sensor)
+            .map_or(0.0, |t| t.sensor_noise_k),
+    );
     let mut rows = Vec::with_capacity(n as usize + 1);
     let mut unlocked = 0u64;
     for k in 0..=n {
