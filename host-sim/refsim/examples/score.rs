@@ -25,6 +25,8 @@ struct Scored {
     category: Category,
     truth: String,
     above: bool,
+    /// An out-of-library type outside the diagnosis's span (`Outside::outside_span`).
+    span_out: bool,
     verdict: Answer,
     correct: bool,
     seconds: f64,
@@ -72,6 +74,7 @@ fn main() -> anyhow::Result<()> {
                 category: d.category,
                 truth: truth.join(", "),
                 above: d.size_over_limit() >= 1.0,
+                span_out: d.outside.is_some_and(|o| o.kind.outside_span()),
                 verdict,
                 correct: correct_for(d.category, &effects, verdict),
                 seconds: t.elapsed().as_secs_f64(),
@@ -86,6 +89,10 @@ fn main() -> anyhow::Result<()> {
             .filter(|s| s.category == c && above.is_none_or(|a| s.above == a))
             .collect()
     };
+    let span_out: Vec<&Scored> = of(Category::Outside, Some(true))
+        .into_iter()
+        .filter(|s| s.span_out)
+        .collect();
     let mut m = format!(
         "# The diagnosis on refsim records ({n} records, seed {})\n\n| measure | result |\n|---|---|\n",
         labels.seed
@@ -110,6 +117,14 @@ fn main() -> anyhow::Result<()> {
         (
             "`unknown` on out-of-library records, all sizes",
             share(&of(Category::Outside, None), |s| s.correct),
+        ),
+        (
+            "`unknown` on out-of-library types outside the span, above their limit",
+            share(&span_out, |s| s.verdict == Answer::Unknown),
+        ),
+        (
+            "a library effect named on out-of-library types outside the span, above their limit",
+            share(&span_out, |s| matches!(s.verdict, Answer::Effect(_))),
         ),
         (
             "two effects: one named",
