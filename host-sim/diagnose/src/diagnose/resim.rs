@@ -404,11 +404,13 @@ impl Resim<'_> {
             }
             phys.gamma = match (rate_ref, gamma) {
                 // θ held over the interval at its midpoint, with the table's angular
-                // acceleration γ′ = Ω′/ω0² (the simulator's convention for a moving rate,
-                // `runner`): a reversal's ramp is then part of the model, not a gap
+                // acceleration γ′ = Ω′/ω0² added to the model's (the simulator's convention
+                // for a moving rate, `runner`): a reversal's ramp is then part of the
+                // model, not a gap; at a constant rate both are the model's own
                 (Some(rr), _) => {
                     let (r0, r1) = (rr[k], rr[k + 1]);
-                    phys.gamma_p = ((r1 - r0) * h.fs_hz).to_radians() / (omega0 * omega0);
+                    phys.gamma_p =
+                        model.phys.gamma_p + ((r1 - r0) * h.fs_hz).to_radians() / (omega0 * omega0);
                     gpd * 0.5 * (r0 + r1) + model.gamma_offset
                 }
                 (None, Some(g)) => g,
