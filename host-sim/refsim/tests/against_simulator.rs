@@ -2,9 +2,11 @@
 //! this generator's record of the same device with the same inputs (its pump frequency,
 //! pump scale and accelerations replayed row by row) agree.
 
+mod common;
+
 use paragyro_refsim::device::DeviceDraw;
 use paragyro_refsim::effects::EffectSizes;
-use paragyro_refsim::protocol::{Protocol, RateSine, Table};
+use paragyro_refsim::protocol::{Protocol, RateSine};
 use paragyro_refsim::sim::{FrontEnd, simulate};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::scenario::{EventKind, EventSpec, Scenario};
@@ -38,16 +40,7 @@ fn compare_with(
     sc.duration_s = duration_s;
     sc.sim.noise_pm_rthz = 0.0;
     let (rec, _) = paragyro_simulator::record::simulate_record(&sc, Some(1)).unwrap();
-    let v0 = rec.header.pump_amp_ref_v;
-    let table = Table {
-        pump_hz: rec.rows.iter().map(|r| r.pump_hz).collect(),
-        s: rec
-            .rows
-            .iter()
-            .map(|r| (r.pump_amp_v / v0).powi(2))
-            .collect(),
-        accel: rec.rows.iter().map(|r| [r.ax_mps2, r.ay_mps2]).collect(),
-    };
+    let table = common::inputs_of(&rec);
     let dev = DeviceDraw::nominal(sc.plant.rate_dps);
     let mut proto = Protocol::plain(
         duration_s,

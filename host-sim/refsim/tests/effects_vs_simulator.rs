@@ -4,10 +4,12 @@
 //! effect at 10× its detection limit, and this generator's record of the same device with
 //! the same inputs and the same effect, agree far better than the effect moves the record.
 
+mod common;
+
 use paragyro_diagnose::blind::outside::Outside as SimOutside;
 use paragyro_refsim::device::DeviceDraw;
 use paragyro_refsim::effects::{EffectSizes, EffectSpec, OutsideSpec};
-use paragyro_refsim::protocol::{Protocol, Table};
+use paragyro_refsim::protocol::Protocol;
 use paragyro_refsim::sim::{FrontEnd, simulate};
 use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::record::{Record, RecordOptions, simulate_record_ext};
@@ -50,16 +52,7 @@ fn mine(rec: &Record, effects: &[&str], outside: Option<OutsideSpec>) -> Vec<[f6
             serde_json::from_value(serde_json::to_value(s).unwrap()).unwrap()
         })
         .collect();
-    let v0 = rec.header.pump_amp_ref_v;
-    let table = Table {
-        pump_hz: rec.rows.iter().map(|r| r.pump_hz).collect(),
-        s: rec
-            .rows
-            .iter()
-            .map(|r| (r.pump_amp_v / v0).powi(2))
-            .collect(),
-        accel: rec.rows.iter().map(|r| [r.ax_mps2, r.ay_mps2]).collect(),
-    };
+    let table = common::inputs_of(rec);
     let mut proto = Protocol::plain(DURATION_S, table.pump_hz[0], sc.plant.rate_dps, [0.0; 2]);
     proto.table = Some(table);
     proto.temp_rise_k = 5.0;
