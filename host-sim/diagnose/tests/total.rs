@@ -520,3 +520,48 @@ fn rows_with_non_finite_values_are_left_out_not_propagated() {
         d.report.output_error
     );
 }
+
+/// A finite value the reader keeps but no device gives (a lock-in channel scaled by 8.6e183
+/// over 300 samples, the fuzz target `diagnosis`'s first find): its squares overflowed the
+/// catch-all's Gram sums, the held-out energy went NaN and report.json held `null`, which
+/// does not read back. Such samples are left out (`ROW_MAX`), with a limitation that counts
+/// them.
+#[test]
+fn a_huge_finite_value_is_left_out_with_a_limitation_not_a_nan_report() {
+    let mut sc = Scenario::load("characterise").unwrap();
+    sc.duration_s = 4.0;
+    let opts = RecordOptions {
+        seed: Some(31),
+        effects: Vec::new(),
+        rate_table: true,
+        temp: Some((25.0, 1.0)),
+    };
+    let (mut rec, _) = simulate_record_ext(&sc, &opts, None, &mut |_| {}).unwrap();
+    for r in &mut rec.rows[600..900] {
+        r.lockin.x_um[0].re *= 8.6e183;
+    }
+    let no_resim = Options {
+        resimulate: false,
+        confirm_runs: 0,
+        ..Options::default()
+    };
+    let d = diagnose(&rec, &no_resim).unwrap();
+    let e = &d.report.energies;
+    assert!(
+        [e.baseline, e.catch_all, e.floor, e.after]
+            .iter()
+            .all(|v| v.is_finite()),
+        "{e:?}"
+    );
+    let json = to_json_sorted(&d.report).unwrap();
+    let back: Report = serde_json::from_str(&json).unwrap();
+    assert_eq!(back.verdict, d.report.verdict);
+    assert!(
+        d.report
+            .limitations
+            .iter()
+            .any(|l| l.stage == "rows" && l.detail.contains("beyond 1e30")),
+        "{:?}",
+        d.report.limitations
+    );
+}

@@ -2,6 +2,9 @@
 //! code promises. The libFuzzer targets (`fuzz_targets/`) and the corpus test
 //! (`tests/corpus.rs`) call the same functions.
 
+pub mod diagnosis;
+pub use diagnosis::diagnosis;
+
 use paragyro_core::{Config, Cplx, Estimator, Lockin, Sample};
 use paragyro_firmware::drivers::ads131m08::{FRAME_BYTES, Frame};
 use paragyro_simulator::record::{parse_record, read_record_from};
@@ -47,23 +50,23 @@ pub fn ads131m08_frame(data: &[u8]) {
 }
 
 /// Reads little-endian values off the input, zero when it runs out.
-struct Bytes<'a>(&'a [u8]);
+pub(crate) struct Bytes<'a>(pub(crate) &'a [u8]);
 
 impl Bytes<'_> {
-    fn take<const N: usize>(&mut self) -> [u8; N] {
+    pub(crate) fn take<const N: usize>(&mut self) -> [u8; N] {
         let mut out = [0u8; N];
         let n = N.min(self.0.len());
         out[..n].copy_from_slice(&self.0[..n]);
         self.0 = &self.0[n..];
         out
     }
-    fn f32(&mut self) -> f32 {
+    pub(crate) fn f32(&mut self) -> f32 {
         f32::from_le_bytes(self.take())
     }
-    fn f64(&mut self) -> f64 {
+    pub(crate) fn f64(&mut self) -> f64 {
         f64::from_le_bytes(self.take())
     }
-    fn u8(&mut self) -> u8 {
+    pub(crate) fn u8(&mut self) -> u8 {
         self.take::<1>()[0]
     }
 }

@@ -124,11 +124,17 @@ fn seeds(target: &str) -> Vec<Vec<u8>> {
         "record_reader" => vec![record_seed()],
         "ads131m08_frame" => frame_seeds(),
         "estimator_step" => step_seeds(),
+        "diagnosis" => diagnosis_seeds(),
         _ => Vec::new(),
     }
 }
 
-const SEEDED: [&str; 3] = ["record_reader", "ads131m08_frame", "estimator_step"];
+const SEEDED: [&str; 4] = [
+    "record_reader",
+    "ads131m08_frame",
+    "estimator_step",
+    "diagnosis",
+];
 
 fn corpus_dir(target: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -244,4 +250,60 @@ fn estimator_step_corpus() {
     let mut seeds = step_seeds();
     seeds.extend(regressions("estimator_step"));
     run(paragyro_fuzz::estimator_step, &seeds, 400, 6);
+}
+
+/// The diagnosis's seeds: the base record as it is, and one edit of each kind
+/// (`paragyro_fuzz::diagnosis`'s opcodes: scale, step, a value, a stuck channel, a reversal,
+/// a temperature ramp, a cut, a spike).
+fn diagnosis_seeds() -> Vec<Vec<u8>> {
+    let span = |k0: u16, len: u16| {
+        let mut v = k0.to_le_bytes().to_vec();
+        v.extend(len.to_le_bytes());
+        v
+    };
+    let mut seeds = vec![Vec::new()];
+    for (op, col, rest) in [
+        (
+            0u8,
+            5u8,
+            [span(600, 300), 1.3f64.to_le_bytes().to_vec()].concat(),
+        ),
+        (
+            1,
+            12,
+            [span(900, 2000), 2e-3f64.to_le_bytes().to_vec()].concat(),
+        ),
+        (
+            2,
+            9,
+            [span(700, 40), f64::NAN.to_le_bytes().to_vec()].concat(),
+        ),
+        (3, 14, span(1000, 200)),
+        (4, 0, [span(800, 2000), vec![100]].concat()),
+        (5, 1, [span(500, 2000), vec![40]].concat()),
+        (6, 0, 1100u16.to_le_bytes().to_vec()),
+        (
+            7,
+            16,
+            [
+                1200u16.to_le_bytes().to_vec(),
+                5.0f64.to_le_bytes().to_vec(),
+            ]
+            .concat(),
+        ),
+    ] {
+        let mut v = vec![op, col];
+        v.extend(rest);
+        seeds.push(v);
+    }
+    seeds
+}
+
+/// The diagnosis over its seeds and a few mutations of them (each run is ≈ 0.2 s: libFuzzer
+/// explores further in `cargo xtask fuzz`).
+#[test]
+fn diagnosis_corpus() {
+    let mut seeds = diagnosis_seeds();
+    seeds.extend(regressions("diagnosis"));
+    run(paragyro_fuzz::diagnosis, &seeds, 16, 7);
 }

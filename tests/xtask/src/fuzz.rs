@@ -28,11 +28,12 @@ use std::process::Command;
 use crate::{cargo, say};
 
 /// The targets, in the order they run (`tests/fuzz/Cargo.toml`'s `[[bin]]`s).
-pub const TARGETS: [&str; 4] = [
+pub const TARGETS: [&str; 5] = [
     "ads131m08_frame",
     "record_reader",
     "scenario_parser",
     "estimator_step",
+    "diagnosis",
 ];
 
 /// What `cargo fuzz build -s none` passes (cargo-fuzz 0.12, `project.rs`), less the

@@ -86,6 +86,10 @@ pub use verdict::{Answer, Secondary, Verdict};
 
 /// Rows per sample (5 drive, then 5 sense).
 pub const NR: usize = 2 * NROWS;
+/// The largest row or column value a usable sample may have, in units of the row's noise:
+/// far above any device's gap (a gap of 10⁶× the noise is a broken record), far below the
+/// square root of the largest `f64` (the Gram sums stay finite over any record).
+pub const ROW_MAX: f64 = 1e30;
 /// Names of the rows.
 pub const ROW_LABELS: [&str; NR] = [
     "drive/DC",
@@ -513,15 +517,28 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     let cols = columns::Columns::build(rec, opts, &rows, &spans)?;
     timing.tick("library_columns_and_beat_scan");
     let cols = cols.with_catch_all(&rows);
-    // a sample whose gap or any column is not finite is not usable (the columns are built
-    // from the record's envelopes: a row the reader kept with NaN or ∞)
+    // a sample whose gap or any column is not finite, or beyond [`ROW_MAX`], is not usable
+    // (the columns are built from the record's envelopes: a row the reader kept with NaN
+    // or ∞, or with a value so large that its square overflows the Gram sums)
+    let within = |v: &f64| v.abs() <= ROW_MAX;
+    let mut left_out = 0usize;
     for (k, u) in rows.usable.iter_mut().enumerate() {
-        *u = *u
-            && rows.y[k].iter().all(|v| v.is_finite())
+        let ok = rows.y[k].iter().all(within)
             && cols
                 .cols
                 .iter()
-                .all(|c| c.v.get(k).is_some_and(|r| r.iter().all(|v| v.is_finite())));
+                .all(|c| c.v.get(k).is_some_and(|r| r.iter().all(within)));
+        left_out += usize::from(*u && !ok);
+        *u = *u && ok;
+    }
+    if left_out > 0 {
+        limits.push(report::Limitation::new(
+            "rows",
+            format!(
+                "{left_out} samples whose rows or columns are not finite or beyond {ROW_MAX:e} \
+                 (in noise units) were left out"
+            ),
+        ));
     }
     // 3. fit and rank
     let fits = rank::Fits::build(&cols, &rows, &spans);
