@@ -133,7 +133,7 @@ pub fn edit(rec: &mut Record, data: &[u8]) {
             return;
         }
         match op {
-            0 | 1 | 2 => {
+            0..=2 => {
                 let s = span(&mut b, n);
                 let v = b.f64();
                 for r in &mut rec.rows[s] {
@@ -154,7 +154,7 @@ pub fn edit(rec: &mut Record, data: &[u8]) {
                 let s = span(&mut b, n);
                 let ramp = f64::from(b.u8());
                 for (j, r) in rec.rows[s].iter_mut().enumerate() {
-                    r.rate_ref_dps = if c % 2 == 0 {
+                    r.rate_ref_dps = if c.is_multiple_of(2) {
                         // from +R to −R through a half cosine of `ramp` samples
                         let f = if ramp == 0.0 {
                             -1.0
@@ -171,7 +171,7 @@ pub fn edit(rec: &mut Record, data: &[u8]) {
                 let s = span(&mut b, n);
                 let k_per_s = f64::from(b.u8() as i8) * 0.05;
                 for (j, r) in rec.rows[s].iter_mut().enumerate() {
-                    r.temp_c = if c % 4 == 0 {
+                    r.temp_c = if c.is_multiple_of(4) {
                         None
                     } else {
                         Some(r.temp_c.unwrap_or(25.0) + k_per_s * j as f64 / 500.0)
