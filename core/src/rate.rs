@@ -481,6 +481,9 @@ pub struct RateState<T> {
     ring_hold: u32,
     /// The slow RLS is gated until this sample (the rate moved).
     gate_until: u64,
+    /// The current gate was opened or renewed by the rate's acceleration (`fast`), not
+    /// only by its departure from the slow rate.
+    gate_fast: bool,
     /// Samples of the current hold that the narrow channel's rate has been still for.
     held: u32,
     /// The hand-over due (Δθ24), 0 if none.
@@ -605,8 +608,9 @@ impl<T: Real> RateState<T> {
     /// One sample: filters the row in both channels and solves it (when the drive is
     /// large enough); at sample `k`, while the slow estimate is settled (`slow_settled`),
     /// a move of the rate (the narrow channel's) gates the slow RLS
-    /// ([`RateState::gates`]). `y3` is the sense cube's fundamental `[Y³]₁` (the rows'
-    /// projection).
+    /// ([`RateState::gates`]); while the die temperature moves (`temp_moving`) a gate the
+    /// quadrature leaves too ends (a drift). `y3` is the sense cube's fundamental
+    /// `[Y³]₁` (the rows' projection).
     #[inline(always)]
     pub fn track(
         &mut self,
@@ -615,7 +619,7 @@ impl<T: Real> RateState<T> {
         kn: &Known<T>,
         y3: Cplx<T>,
         th: &SlowTheta<T>,
-        (k, slow_settled): (u64, bool),
+        (k, slow_settled, temp_moving): (u64, bool, bool),
     ) {
         let (a, b) = (e.a[0], e.b[0]);
         let om = kn.om;
@@ -693,6 +697,8 @@ impl<T: Real> RateState<T> {
             self.moving_until = k + d.gate_len;
         }
         if slow_settled && moved && quad_ok && steady {
+            // a new gate remembers whether the rate's acceleration opened it
+            self.gate_fast = fast || (self.gate_fast && k < self.gate_until);
             self.gate_until = k + d.gate_len;
             // a hold the slow RLS cannot end (after a step its own departure from the new
             // rate renews the gate): once the narrow channel's rate has stayed within the
@@ -713,6 +719,19 @@ impl<T: Real> RateState<T> {
             }
         } else {
             self.held = 0;
+            // a gate the rate's departure alone opened, whose quadrature has since left the
+            // slow θ23 too, while the die temperature moves (module `thermal`): the onset
+            // of a drift (ωy² moves both directions of the row, in a ratio the noise decides
+            // which crosses the tolerance first), not a move of the rate: it ends, and the
+            // slow RLS follows the drift with its walk (modules `drift`, `thermal`; a 20 s
+            // warm-up's onset otherwise held the slow RLS for the whole gate while ωy²
+            // moved, and the change detector reset it at the gate's end). A gate the
+            // acceleration opened (a step, a sine) holds; at a steady or unknown temperature
+            // every gate runs its length and a change of the device is the change
+            // detector's once it ends (a jump is detected and re-identified either way).
+            if temp_moving && !quad_ok && !self.gate_fast && k < self.gate_until {
+                self.gate_until = k;
+            }
         }
     }
 

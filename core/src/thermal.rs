@@ -253,6 +253,9 @@ pub struct ThermalState<T> {
     pub rate: T,
     /// The last block's mean temperature, °C (`None`: that block had none).
     pub level: Option<T>,
+    /// The die temperature moves: the last block's smoothed rate is beyond the steady
+    /// threshold ([`STEADY_K_S`]; false without a temperature).
+    pub moving: bool,
     /// The block temperature's noise variance, K² (the mean square of its one-block
     /// forecast's error, an EWMA over [`VAR_T_BLOCKS`] blocks) and the blocks it has seen.
     pub var_t: T,
@@ -307,6 +310,7 @@ impl<T: Real> ThermalState<T> {
         if n == 0 {
             self.rate = T::ZERO;
             self.level = None;
+            self.moving = false;
             return None;
         }
         // the block's mean, referred to its end (where `z` is taken) with the rate so far
@@ -337,6 +341,7 @@ impl<T: Real> ThermalState<T> {
         // written into a warm-start record) is the block's own
         self.level = Some(tb);
         let steady = per_block.abs() < d.steady_per_block;
+        self.moving = !steady;
         if learn {
             match self.t_ref {
                 None => {

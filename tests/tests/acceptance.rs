@@ -111,7 +111,7 @@ fn drift_retune() {
 /// 5 Hz ±50 °/s sine on the 150 °/s from start-up to the end
 /// (`host-sim/scenarios/drift-retune-rate-sine.toml`). The slow RLS takes the rate as a
 /// random walk (`rate.walk_dps`): with the rate a constant of the slow RLS the estimate
-/// does not settle under the sine and does not retune. At most 30 resets here (16
+/// does not settle under the sine and does not retune. At most 30 resets here (18
 /// measured; the drift's own re-identification takes 13 on `drift-retune`).
 #[test]
 fn drift_retune_while_the_rate_moves() {

@@ -89,21 +89,24 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
 fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
     // before its coefficient is learned, the temperature's rate opens the walk (core
     // `thermal`): the ramp's sudden onset is followed, not read as jumps that cascade (with
-    // the walk alone, seeds 2, 3, 4 and 6 gave 164-167 resets)
-    let mut worst = Vec::new();
+    // the walk alone, seeds 2, 3, 4 and 6 give 164-167 resets). On seeds 2 and 5 the narrow
+    // rate channel's in-phase deviation crosses its gate before the quadrature's at the
+    // onset: the gate that opens ends as the quadrature departs too (core `rate`, a drift,
+    // not a move of the rate); held for its whole 0.3 s, the change detector reset both
+    // axes at its end and the rate was valid on 81 % of seed 5's ramp.
+    let mut seen = Vec::new();
     for seed in 1..=6 {
         let mut sc = warm_up();
         sc.seed = seed;
         let r = run_f32(&sc);
-        let resets = resets_after(&r, 2.5);
-        worst.push((seed, resets, valid_share(&r, 5.0, 25.0)));
+        seen.push((seed, resets_after(&r, 2.5), valid_share(&r, 5.0, 25.0)));
     }
-    assert!(worst.iter().all(|w| w.1 <= 3), "{worst:?}");
-    let good = worst.iter().filter(|w| w.1 == 0 && w.2 >= 0.95).count();
-    assert!(good >= 3, "{worst:?}");
+    assert!(
+        seen.iter().all(|w| w.1 == 0 && w.2 >= 0.99),
+        "(seed, resets, rate valid during the ramp): {seen:?}"
+    );
 }
 
-/// Covariance resets after `t_s`.
 /// The share of the samples in [from, to) s whose rate is flagged valid.
 fn valid_share(r: &RunResult, from: f64, to: f64) -> f64 {
     let span: Vec<_> = r
@@ -114,6 +117,7 @@ fn valid_share(r: &RunResult, from: f64, to: f64) -> f64 {
     span.iter().filter(|x| x.rate_valid).count() as f64 / span.len() as f64
 }
 
+/// Covariance resets after `t_s`.
 fn resets_after(r: &RunResult, t_s: f64) -> u32 {
     let at = r.trace.iter().find(|x| x.t_s >= t_s).expect("in the run");
     r.trace.last().expect("a trace").resets - at.resets

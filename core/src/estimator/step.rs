@@ -245,7 +245,7 @@ impl<T: Real> State<T> {
             &self.last_known,
             p.y.cube.h1,
             &th,
-            (self.k, slow_ok),
+            (self.k, slow_ok, self.thermal.moving),
         );
         // a hold after a rate step, once the narrow channel's rate is still: the slow
         // estimate takes its averaged rate (θ24 + Δ, θ14 − Δ; Δ = 0 on all other samples)
