@@ -37,7 +37,7 @@ use rayon::prelude::*;
 pub use parquet_io::{read_parquet, write_parquet};
 pub use report::{LotSummary, report};
 pub use row::{Column, Kind, LotRow, ParamValues, columns};
-pub use spec::{Deviation, Limit, Spec, Yield};
+pub use spec::{Deviation, Judgement, Limit, Spec, Yield};
 
 /// How to diagnose a lot (default: the diagnosis's defaults, no reports, one thread per
 /// core).
