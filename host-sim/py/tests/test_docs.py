@@ -1,0 +1,27 @@
+"""The README's session runs as written (its one ```python block)."""
+
+from __future__ import annotations
+
+import re
+import runpy
+from pathlib import Path
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def session_block() -> str:
+    text = README.read_text()
+    blocks = re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+    assert len(blocks) == 1, f"expected one python block in {README}, found {len(blocks)}"
+    return blocks[0]
+
+
+def test_the_readme_session_runs(tmp_path, monkeypatch, capsys):
+    script = tmp_path / "session.py"
+    script.write_text(session_block())
+    monkeypatch.chdir(tmp_path)
+    runpy.run_path(str(script), run_name="__main__")
+    out = capsys.readouterr().out
+    assert "nonlinear_damping nonlinear_damping" in out and "rate 1" in out
+    assert (tmp_path / "out" / "diag" / "report.json").exists()
+    assert (tmp_path / "out" / "diag" / "report.md").exists()
