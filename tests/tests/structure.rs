@@ -35,6 +35,7 @@ fn sources() -> Vec<PathBuf> {
         "host-sim/fw-replay/src",
         "host-sim/fil/src",
         "host-sim/cli/src",
+        "host-sim/lot/src",
         "tests/src",
         "tests/xtask/src",
         "tests/fuzz/src",
