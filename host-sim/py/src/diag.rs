@@ -51,7 +51,7 @@ impl NativeDiagnosis {
 }
 
 /// The diagnosis options of the CLI's flags (`model`: a built-in scenario or a TOML).
-fn options(
+pub(crate) fn options(
     model: Option<&str>,
     resimulate: bool,
     confirm_runs: Option<usize>,

@@ -7,7 +7,8 @@
 //! * simulation: `write_simulated_record` / `simulate_record_with`, as `paragyro-sim record`;
 //! * the core open-loop on a record: `record::replay` with `config_for`, as `paragyro-sim replay`;
 //! * the diagnosis: `paragyro_diagnose::diagnose`, as `paragyro-sim diagnose`;
-//! * the rate-response datasheet: `rate_response::report` / `run_all`, as `paragyro-sim rate-response`.
+//! * the rate-response datasheet: `rate_response::report` / `run_all`, as `paragyro-sim rate-response`;
+//! * a lot's row: `paragyro_lot::diagnose_path`, as the CLI's lot (one task of `paragyro.lot`).
 //!
 //! Columns cross the boundary as native-endian `f64` bytes (numpy's `frombuffer` on the
 //! Python side), reports as their serde JSON (report.json's exact text, parsed by Python).
@@ -17,6 +18,7 @@
 
 mod diag;
 mod errors;
+mod lot;
 mod record;
 mod run;
 
@@ -27,6 +29,8 @@ use pyo3::prelude::*;
 mod native {
     #[pymodule_export]
     use super::diag::{NativeDiagnosis, diagnose_path, diagnose_record};
+    #[pymodule_export]
+    use super::lot::{check_scenario, lot_columns, lot_row};
     #[pymodule_export]
     use super::record::{parse_record_text, read_record, write_record};
     #[pymodule_export]

@@ -59,23 +59,32 @@ def client():
     cluster.close()
 
 
+def same(a, b) -> bool:
+    """Equal, a missing value (None, NaN) only to a missing one."""
+    missing = lambda v: v is None or (isinstance(v, float) and np.isnan(v))  # noqa: E731
+    return (missing(a) and missing(b)) or a == b
+
+
 def check_row_against_cli(row: dict, report: dict) -> None:
-    """Every field of the row that report.json has, equal."""
-    assert row["error"] is None
+    """Every field of the row that report.json has, equal (the same float64)."""
+    assert same(row["error"], None)
     assert row["verdict"] == report["verdict"]
-    assert row["secondary"] == (report.get("secondary") or {}).get("effect")
-    for k in ("gap_before", "gap_after", "gap_closure", "residual_over_noise", "samples"):
+    assert same(row["secondary"], (report.get("secondary") or {}).get("effect"))
+    assert row["closest_library_effect"] == report["closest_library_effect"]
+    for k in ("gap_before", "gap_after", "gap_closure", "gap_fraction_of_baseline",
+              "unexplained_above_noise", "residual_over_noise", "samples", "model", "seconds"):  # fmt: skip
         assert row[k] == report[k], k
     assert row["noise_energy_ratio"] == report["parameter_face"]["noise_energy_ratio"]
+    assert same(row["output_error_closure"], None)  # resimulate=False: none
     testable = [c for c in report["ranking"] if c["untestable"] is None]
     for i, c in enumerate(testable[:3]):
-        for f in ("effect", "size", "size_sigma", "gap_closure", "significant"):
-            assert row[f"top{i + 1}_{f}"] == c[f], (i, f)
+        for f, g in (("effect", "effect"), ("size", "size"), ("sigma", "size_sigma"), ("gap_closure", "gap_closure")):
+            assert same(row[f"top{i + 1}_{f}"], c[g]), (i, f)
     assert len(report["parameter_face"]["parameters"]) == 14
     for p in report["parameter_face"]["parameters"]:
-        for f in ("device", "sigma", "relative", "t"):
-            v = row[f"{p['name']}_{f}"]
-            assert v == p[f] or (v is None and p[f] is None), (p["name"], f)
+        for f, g in (("model", "model"), ("device", "device"), ("sigma", "sigma"),
+                     ("rel", "relative"), ("rel_sigma", "relative_sigma"), ("t", "t")):  # fmt: skip
+            assert same(row[f"{p['name']}_{f}"], p[g]), (p["name"], f)
 
 
 def test_lot_rows_are_the_clis_reports(lot_paths, client, cli, tmp_path):
@@ -104,13 +113,14 @@ def test_lot_rows_are_the_clis_reports(lot_paths, client, cli, tmp_path):
     assert df["error"].iloc[:-1].isna().all(), df["error"].tolist()
     # the malformed record is a row with the CLI's located error
     bad = df.iloc[-1]
-    assert bad["error"].startswith("RecordError: ") and f"{lot_paths[-1]}:4:" in bad["error"]
-    assert "header 'fs_hz'" in bad["error"]
-    # every device's row is the CLI's report.json, field for field
-    rows = df.replace({np.nan: None}).to_dict("records")
+    assert bad["error"] == f"{lot_paths[-1]}:4:10: header 'fs_hz': expected a positive number, found 'fast'"
+    assert bad["record"] == "lot-bad.csv" and same(bad["verdict"], None)
+    # every device's row is the CLI's report.json, field for field (its wall time aside)
+    rows = df.to_dict("records")
     for p, row in zip(lot_paths[:-1], rows[:-1]):
         cli("diagnose", p, "--out", tmp_path / p.stem, "--no-resim")
         report = json.loads((tmp_path / p.stem / "report.json").read_text())
+        report["seconds"] = row["seconds"]
         check_row_against_cli(row, report)
     verdicts = dict(zip([s for s, _ in DEVICES], df["verdict"]))
     assert verdicts[12] == "nonlinear_damping" and verdicts[13] == "feedthrough"
@@ -122,3 +132,4 @@ def test_lot_rows_are_the_clis_reports(lot_paths, client, cli, tmp_path):
     assert pdf.height == len(df) and pdf.columns == list(df.columns)
     assert pdf["verdict"].to_list()[:-1] == df["verdict"].tolist()[:-1]
     assert pdf["wy2_sigma"].to_list()[:-1] == df["wy2_sigma"].tolist()[:-1]
+    assert pdf["samples"].dtype == pl.Int64 and pdf["samples"].to_list()[-1] is None

@@ -14,12 +14,11 @@ from __future__ import annotations
 import json
 import os
 import time
-from typing import Any, Callable, Dict, Iterable, List, Optional, Union
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union
 
 from . import _native
-from ._errors import ParagyroError
 
-__all__ = ["diagnose", "diagnose_one", "row_from_report"]
+__all__ = ["diagnose", "diagnose_one", "columns", "write_parquet"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -28,50 +27,9 @@ PathLike = Union[str, "os.PathLike[str]"]
 WORKER_ENV = {"RAYON_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 
 
-def row_from_report(path: str, report: Dict[str, Any], warnings: List[str], seconds: float) -> Dict[str, Any]:
-    """One flat row from a report.json dict (the thin fallback of ``paragyro-lot``'s
-    ``LotRow``, used while this build has no ``_native.lot_row``)."""
-    row: Dict[str, Any] = {
-        "path": path,
-        "device": os.path.splitext(os.path.basename(path))[0],
-        "error": None,
-        "verdict": report["verdict"],
-        "secondary": (report.get("secondary") or {}).get("effect"),
-        "gap_before": report["gap_before"],
-        "gap_after": report["gap_after"],
-        "gap_closure": report["gap_closure"],
-        "output_error_closure": (report.get("output_error") or {}).get("closure"),
-        "noise_energy_ratio": report["parameter_face"]["noise_energy_ratio"],
-        "residual_over_noise": report["residual_over_noise"],
-        "samples": report["samples"],
-        "diagnosis_s": report["seconds"],
-        "task_s": seconds,
-        "warnings": len(warnings),
-    }
-    testable = [c for c in report["ranking"] if c["untestable"] is None]
-    for i in range(3):
-        c = testable[i] if i < len(testable) else {}
-        row[f"top{i + 1}_effect"] = c.get("effect")
-        row[f"top{i + 1}_size"] = c.get("size")
-        row[f"top{i + 1}_size_sigma"] = c.get("size_sigma")
-        row[f"top{i + 1}_gap_closure"] = c.get("gap_closure")
-        row[f"top{i + 1}_significant"] = c.get("significant")
-    for p in report["parameter_face"]["parameters"]:
-        row[f"{p['name']}_device"] = p["device"]
-        row[f"{p['name']}_sigma"] = p["sigma"]
-        row[f"{p['name']}_relative"] = p["relative"]
-        row[f"{p['name']}_t"] = p["t"]
-    return row
-
-
-def error_row(path: str, error: str, seconds: float = float("nan")) -> Dict[str, Any]:
-    """The row of a record that could not be diagnosed."""
-    return {
-        "path": path,
-        "device": os.path.splitext(os.path.basename(path))[0],
-        "error": error,
-        "task_s": seconds,
-    }
+def error_row(path: str, error: str) -> Dict[str, Any]:
+    """The row of a record whose task failed past its retries (the other columns null)."""
+    return {"record": os.path.basename(path), "path": path, "error": error}
 
 
 def diagnose_one(
@@ -79,23 +37,20 @@ def diagnose_one(
     model: Optional[str] = None,
     resimulate: bool = True,
     confirm_runs: Optional[int] = None,
+    reports: Optional[str] = None,
 ) -> Dict[str, Any]:
-    """One device's row (the lot's task; it never raises for a bad record: the error is
-    the row's ``error``)."""
-    t0 = time.perf_counter()
-    lot_row = getattr(_native, "lot_row", None)
-    try:
-        if lot_row is not None:
-            return json.loads(
-                lot_row(path, model=model, resimulate=resimulate, confirm_runs=confirm_runs)
-            )
-        native, warnings = _native.diagnose_path(
-            path, model=model, resimulate=resimulate, confirm_runs=confirm_runs
-        )
-        report = json.loads(native.report_json())
-        return row_from_report(path, report, list(warnings), time.perf_counter() - t0)
-    except ParagyroError as e:
-        return error_row(path, f"{type(e).__name__}: {e}", time.perf_counter() - t0)
+    """One device's row: ``paragyro_lot::diagnose_path``, the CLI's lot's own function (the
+    lot's task). It never raises for a bad record: the error is the row's ``error``, with
+    the file, line and column of the reader's message."""
+    return json.loads(
+        _native.lot_row(path, model=model, resimulate=resimulate, confirm_runs=confirm_runs, reports=reports)
+    )
+
+
+def columns() -> List[Tuple[str, str]]:
+    """The row's columns in order, with their type (``str``, ``f64``, ``i64``):
+    ``paragyro_lot::columns``, the Parquet schema of the Rust lot."""
+    return list(_native.lot_columns())
 
 
 def _client(client: Any, n_workers: Optional[int]):
@@ -127,6 +82,7 @@ def diagnose(
     model: Optional[str] = None,
     resimulate: bool = True,
     confirm_runs: Optional[int] = None,
+    reports: Optional[PathLike] = None,
     n_workers: Optional[int] = None,
     on_row: Optional[Callable[[int, Dict[str, Any]], None]] = None,
 ) -> Any:
@@ -137,13 +93,19 @@ def diagnose(
     afterwards), a ``distributed.Client`` or a scheduler address (``"tcp://host:8786"``);
     ``retries``: Dask's retries of a task that raised; a task whose worker died is
     rescheduled by the scheduler. ``model``, ``resimulate``, ``confirm_runs``: as
-    :func:`paragyro.diagnose`. ``out``: also write the rows as Parquet. ``on_row(i, row)``
-    is called in the client as each row arrives (progress).
+    :func:`paragyro.diagnose`; ``reports``: write each device's report into
+    ``reports/<record stem>/`` (a folder the workers can reach). ``out``: also write the
+    rows as Parquet. ``on_row(i, row)`` is called in the client as each row arrives
+    (progress). The columns are :func:`columns` (the Rust lot's), typed: text, float64,
+    nullable Int64.
     """
     import pandas as pd
     from distributed import as_completed
 
     paths = [os.path.abspath(os.fspath(p)) for p in paths]
+    if model is not None:
+        _native.check_scenario(model)  # a bad model: one ScenarioError here, not a lot of error rows
+    rep = None if reports is None else os.path.abspath(os.fspath(reports))
     c, owned = _client(client, n_workers)
     try:
         futures = c.map(
@@ -152,6 +114,7 @@ def diagnose(
             model=model,
             resimulate=resimulate,
             confirm_runs=confirm_runs,
+            reports=rep,
             retries=retries,
             pure=False,
             key=[f"paragyro-lot-{i}-{os.path.basename(p)}-{os.getpid()}-{time.time_ns()}" for i, p in enumerate(paths)],
@@ -176,15 +139,23 @@ def diagnose(
 
 
 def _frame(rows: List[Optional[Dict[str, Any]]]) -> Any:
-    """The rows as a DataFrame whose missing values read back from Parquet as written
-    (an object column's missing value is None, not NaN)."""
+    """The rows as a DataFrame with the Rust lot's columns, in its order and types (text:
+    pandas' ``str`` from pandas 3 on, object before; float64 with NaN; nullable Int64), so
+    that a Parquet file written from it reads back equal."""
     import pandas as pd
 
-    df = pd.DataFrame(rows)
-    for c in df.columns:
-        if df[c].dtype == object:
-            df[c] = df[c].astype(object).where(df[c].notna(), None)
-    return df
+    text = "str" if int(pd.__version__.split(".")[0]) >= 3 else object
+
+    data: Dict[str, Any] = {}
+    for name, kind in columns():
+        vals = [(r or {}).get(name) for r in rows]
+        if kind == "f64":
+            data[name] = pd.array([float("nan") if v is None else v for v in vals], dtype="float64")
+        elif kind == "i64":
+            data[name] = pd.array(vals, dtype="Int64")
+        else:
+            data[name] = pd.Series(vals, dtype=text)
+    return pd.DataFrame(data)
 
 
 def write_parquet(df: Any, out: PathLike) -> None:
