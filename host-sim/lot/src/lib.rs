@@ -51,7 +51,6 @@ pub struct LotOptions {
     pub threads: usize,
 }
 
-
 /// The record files of a lot folder, sorted by name: every `*.csv` (any case) directly in
 /// `dir`, not its subfolders; a simulated record's truth (`FILE.truth.json`) and any other
 /// `*.truth.*` file is skipped.
