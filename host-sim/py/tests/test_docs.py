@@ -1,4 +1,4 @@
-"""The README's session runs as written (its one ```python block)."""
+"""The README's session runs as written (the ```python block of "## A session")."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 
 def session_block() -> str:
     text = README.read_text()
-    blocks = re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
-    assert len(blocks) == 1, f"expected one python block in {README}, found {len(blocks)}"
+    section = re.search(r"^## A session.*?(?=^## )", text, flags=re.S | re.M)
+    assert section, f"no '## A session' section in {README}"
+    blocks = re.findall(r"^```python\n(.*?)^```", section.group(0), flags=re.S | re.M)
+    assert len(blocks) == 1, f"expected one python block in '## A session', found {len(blocks)}"
     return blocks[0]
 
 

@@ -18,6 +18,7 @@
 use std::env;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Instant;
 
 use crate::{cargo, say};
 
@@ -40,13 +41,16 @@ fn target_dir(root: &Path) -> PathBuf {
         .unwrap_or_else(|| root.join("target"))
 }
 
-/// Builds the package into the venv and runs its pytest suite (`pytest_args` passed on).
+/// Builds the package into the venv and runs its pytest suite (`pytest_args` passed on);
+/// says how long each step took.
 pub fn test(pytest_args: &[String]) -> Result<(), String> {
     let root = root();
     let target = target_dir(&root);
     let venv = target.join("py-venv");
+    let t = Instant::now();
     let py = venv_python(&venv)?;
     install_requirements(&root, &venv, &py)?;
+    took("venv and packages", t);
     let bin_dir = venv.join("bin");
     let path = match env::var_os("PATH") {
         Some(p) => {
@@ -65,30 +69,30 @@ pub fn test(pytest_args: &[String]) -> Result<(), String> {
         "maturin develop --profile {PROFILE} (the package into {})",
         venv.display()
     ));
+    let t = Instant::now();
     run(
         Command::new(bin_dir.join("maturin"))
-            .args([
-                "develop",
-                "--quiet",
-                "--profile",
-                PROFILE,
-                "--manifest-path",
-            ])
+            .args(["develop", "--quiet", "--profile", PROFILE])
+            .arg("--manifest-path")
             .arg(&manifest)
             .envs(venv_env.iter().cloned()),
         "maturin develop",
     )?;
+    took("the package", t);
     say(&format!(
         "cargo build --profile {PROFILE} -p paragyro-sim (the CLI the tests compare with)"
     ));
+    let t = Instant::now();
     run(
         Command::new(cargo())
             .args(["build", "-q", "--profile", PROFILE, "-p", "paragyro-sim"])
             .current_dir(&root),
         "cargo build -p paragyro-sim",
     )?;
+    took("the CLI", t);
     let sim = target.join(PROFILE).join("paragyro-sim");
     say("pytest host-sim/py/tests");
+    let t = Instant::now();
     run(
         Command::new(&py)
             .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
@@ -98,7 +102,13 @@ pub fn test(pytest_args: &[String]) -> Result<(), String> {
             .envs(venv_env.iter().cloned())
             .current_dir(&root),
         "pytest host-sim/py/tests",
-    )
+    )?;
+    took("pytest", t);
+    Ok(())
+}
+
+fn took(what: &str, t: Instant) {
+    say(&format!("  {what}: {:.0} s", t.elapsed().as_secs_f64()));
 }
 
 /// The venv's interpreter, making the venv first if needed.
