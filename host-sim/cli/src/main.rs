@@ -20,6 +20,9 @@
 //! paragyro-sim faults --ticks N --out DIR             the fault campaign: faults.json, faults.md
 //!              [--seed N] [--class a,b]
 //! paragyro-sim soak [--hours H] --out DIR             the soak benchmark: soak.json, soak.md
+//! paragyro-sim lot DIR --out lot.parquet              a lot of records diagnosed: one row per
+//!              [--reports DIR] [--spec spec.toml]      device, the devices' reports, the lot
+//!              [--report DIR] [--jobs N]               report (lot.md); `lot-report` redraws it
 //! ```
 //!
 //! Exit codes: 0 success; 1 the run or the outputs failed; 2 the scenario could not be loaded
@@ -78,6 +81,12 @@ enum Command {
     /// Diagnose the gap between a record and the simulator: where it lies, which effect
     /// causes it, how far it shrinks once that effect is added (report.md, report.json, PNGs).
     Diagnose(cmd::diagnose::Args),
+    /// Diagnose every record of a folder (a lot): one row per device in a Parquet file,
+    /// the devices' reports and the lot report against a spec (yield, outliers).
+    Lot(cmd::lot::Args),
+    /// Redraw the lot report (lot.md, lot.json, plots) from a lot's Parquet file.
+    #[command(name = "lot-report")]
+    LotReport(cmd::lot::ReportArgs),
     /// Run the core open-loop on a record; write estimates.csv and summary.json.
     Replay(cmd::replay::Args),
     /// Run the built-in `drift-retune` scenario, print its summary and write the plots.
@@ -136,6 +145,8 @@ fn dispatch(command: Command, ctx: &mut Ctx) -> Result<(), Failure> {
         Command::Effects => effects::exec(ctx),
         Command::Blind(a) => blind::exec(a, ctx),
         Command::Diagnose(a) => diagnose::exec(a, ctx),
+        Command::Lot(a) => lot::exec(a, ctx),
+        Command::LotReport(a) => lot::exec_report(a, ctx),
         Command::Replay(a) => replay::exec(a, ctx),
         Command::Demo(a) => demo::exec(a, ctx),
         Command::Faults(a) => faults::exec(a, ctx),

@@ -166,3 +166,91 @@ fn command_line_parsing() {
     .unwrap_err();
     assert_eq!(e.exit_code(), 2);
 }
+
+/// `lot` on a folder of one short record and one corrupt file: exit 0, the corrupt file an
+/// error row, the Parquet, the device's report and the lot report written; `lot-report`
+/// redraws the report from the Parquet. A folder with nothing readable exits 2 (still with
+/// its rows), one without records too.
+#[test]
+fn lot_then_lot_report() {
+    let dir = std::env::temp_dir().join(format!("paragyro-cli-lot-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let lot = dir.join("lot");
+    std::fs::create_dir_all(&lot).unwrap();
+    let mut sc = Scenario::load("characterise").unwrap();
+    sc.duration_s = 4.0;
+    let opts = paragyro_simulator::record::RecordOptions {
+        seed: Some(5),
+        rate_table: true,
+        ..Default::default()
+    };
+    paragyro_simulator::record::write_simulated_record(
+        &sc,
+        &lot.join("dev-1.csv"),
+        &opts,
+        &mut |_| {},
+    )
+    .unwrap();
+    std::fs::write(lot.join("dev-2.csv"), "garbage\n").unwrap();
+    let pq = dir.join("lot.parquet");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (code, out, err) = cli(&[
+        "lot",
+        &s(&lot),
+        "--out",
+        &s(&pq),
+        "--reports",
+        &s(&dir.join("reports")),
+        "--report",
+        &s(&dir.join("report")),
+        "--jobs",
+        "2",
+        "--no-resim",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("2 records in "), "{out}");
+    assert!(out.contains(": 1 diagnosed, 1 errors\n"), "{out}");
+    assert!(dir.join("reports/dev-1/report.md").is_file());
+    assert!(dir.join("report/lot.md").is_file());
+    let rows = paragyro_lot::read_parquet(&pq).unwrap();
+    assert_eq!(rows.len(), 2);
+    assert!(rows[1].error.as_deref().unwrap().contains("dev-2.csv"));
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, "[parameters.wy2]\nlo = -0.01\nhi = 0.01\n").unwrap();
+    let (code, out, err) = cli(&[
+        "lot-report",
+        &s(&pq),
+        "--spec",
+        &s(&spec),
+        "--out",
+        &s(&dir.join("again")),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("2 devices read from "), "{out}");
+    assert!(dir.join("again/lot.md").is_file() && dir.join("again/dev_wy2.png").is_file());
+    // a bad spec: exit 2 with the file's name
+    std::fs::write(&spec, "[parameters.wy9]\nhi = 1\n").unwrap();
+    let (code, _, err) = cli(&[
+        "lot-report",
+        &s(&pq),
+        "--spec",
+        &s(&spec),
+        "--out",
+        &s(&dir),
+    ]);
+    assert_eq!(code, EXIT_LOAD);
+    assert!(err.contains("spec.toml") && err.contains("wy9"), "{err}");
+    // nothing readable: exit 2, the rows still written
+    std::fs::remove_file(lot.join("dev-1.csv")).unwrap();
+    let (code, _, err) = cli(&["lot", &s(&lot), "--out", &s(&pq)]);
+    assert_eq!(code, EXIT_LOAD);
+    assert!(err.contains("none of the 1 records"), "{err}");
+    assert_eq!(paragyro_lot::read_parquet(&pq).unwrap().len(), 1);
+    // no record at all
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (code, _, err) = cli(&["lot", &s(&empty), "--out", &s(&pq)]);
+    assert_eq!(code, EXIT_LOAD);
+    assert!(err.contains("no record"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 pub use parquet_io::{read_parquet, write_parquet};
 pub use report::{LotSummary, report};
 pub use row::{Column, Kind, LotRow, ParamValues, columns};
-pub use spec::{Deviation, Limit, Spec, Yield};
+pub use spec::{Deviation, Judgement, Limit, Spec, Yield};
 
 /// How to diagnose a lot (default: the diagnosis's defaults, no reports, one thread per
 /// core).
@@ -89,23 +89,26 @@ pub fn diagnose_path(path: &Path, opts: &LotOptions) -> LotRow {
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
     let shown = path.display().to_string();
-    let run = catch_unwind(AssertUnwindSafe(|| diagnose_inner(path, &name, opts)));
-    match run {
+    match caught(|| diagnose_inner(path, &name, opts)) {
         Ok(Ok(row)) => row,
         Ok(Err(e)) => LotRow::failed(&name, &shown, format!("{e:#}")),
-        Err(panic) => {
-            let what = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
-            LotRow::failed(
-                &name,
-                &shown,
-                format!("internal error diagnosing {shown}: {what}"),
-            )
-        }
+        Err(what) => LotRow::failed(
+            &name,
+            &shown,
+            format!("internal error diagnosing {shown}: {what}"),
+        ),
     }
+}
+
+/// `f()`, or its panic's message (a `&str` or `String` payload; "unknown panic" else).
+fn caught<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    catch_unwind(AssertUnwindSafe(f)).map_err(|panic| {
+        panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into())
+    })
 }
 
 fn diagnose_inner(path: &Path, name: &str, opts: &LotOptions) -> Result<LotRow> {
@@ -158,4 +161,25 @@ pub fn diagnose_lot(
             })
             .collect()
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::caught;
+
+    /// A panic is its message, whatever its payload; the panic does not escape.
+    #[test]
+    fn a_panic_becomes_its_message() {
+        assert_eq!(caught(|| 7), Ok(7));
+        assert_eq!(caught(|| -> u8 { panic!("boom") }), Err("boom".into()));
+        let n = 3;
+        assert_eq!(
+            caught(|| -> u8 { panic!("boom {n}") }),
+            Err("boom 3".into())
+        );
+        assert_eq!(
+            caught(|| -> u8 { std::panic::panic_any(5u32) }),
+            Err("unknown panic".into())
+        );
+    }
 }

@@ -55,13 +55,22 @@ pub(crate) fn histogram(path: &Path, h: &Hist<'_>) -> Result<()> {
         .x_desc(h.x_desc)
         .y_desc("devices")
         .x_label_formatter(&|v| {
-            if x1 - x0 < 1e-2 {
+            if v.abs() < 1e-9 * (x1 - x0) {
+                "0".into()
+            } else if x1 - x0 < 1e-2 {
                 format!("{v:.2e}")
             } else {
                 format!("{v:.3}")
             }
         })
-        .y_label_formatter(&|v| format!("{v:.0}"))
+        // device counts: whole numbers only
+        .y_label_formatter(&|v| {
+            if (v - v.round()).abs() < 1e-6 {
+                format!("{v:.0}")
+            } else {
+                String::new()
+            }
+        })
         .label_style((FONT, 18))
         .axis_desc_style((FONT, 18))
         .draw()?;

@@ -302,7 +302,10 @@ fn pct(x: Option<f64>) -> String {
 fn num(x: Option<f64>, dev: Deviation) -> String {
     match (x, dev) {
         (None, _) => "–".into(),
-        (Some(v), Deviation::Relative) => format!("{:+.4} %", 100.0 * v),
+        (Some(v), Deviation::Relative) if v == 0.0 || (100.0 * v).abs() >= 0.01 => {
+            format!("{:+.3} %", 100.0 * v)
+        }
+        (Some(v), Deviation::Relative) => format!("{:+.2e} %", 100.0 * v),
         (Some(v), Deviation::Absolute) => format!("{v:+.3e}"),
     }
 }

@@ -11,6 +11,7 @@ pub mod diagnose;
 pub mod effects;
 pub mod faults;
 pub mod list;
+pub mod lot;
 pub mod paper001;
 pub mod paper_claims;
 pub mod paper_raw;
