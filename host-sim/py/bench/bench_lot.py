@@ -79,7 +79,7 @@ def main() -> int:
     # … and one Dask task on a running one-worker LocalCluster (submit, run, gather)
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
                       env=dict(paragyro.lot.WORKER_ENV)) as cluster, Client(cluster) as client:  # fmt: skip
         paragyro.lot.diagnose([rec], client=client, resimulate=resim)  # warm the worker
         dask1 = timed(lambda: paragyro.lot.diagnose([rec], client=client, resimulate=resim), a.reps)
@@ -95,7 +95,7 @@ def main() -> int:
     res = {}
     for n in (1, 2):
         t0 = time.perf_counter()
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                           env=dict(paragyro.lot.WORKER_ENV)) as cluster, Client(cluster) as client:  # fmt: skip
             client.wait_for_workers(n)
             t1 = time.perf_counter()

@@ -63,7 +63,7 @@ def _client(client: Any, n_workers: Optional[int]):
             n_workers=n_workers or os.cpu_count() or 1,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=":0",
             env=dict(WORKER_ENV),
         )
         c = Client(cluster)
