@@ -175,3 +175,10 @@ where
     })
     .map_err(|e| e.into_pyerr(py))
 }
+
+/// Panics inside the guard (for the tests: a panic must reach Python as
+/// `paragyro.InternalError`, never abort the interpreter).
+#[pyfunction]
+pub fn _panic_inside_the_guard(py: Python<'_>, message: String) -> PyResult<()> {
+    guarded(py, || -> Result<(), Fail> { panic!("{message}") })
+}

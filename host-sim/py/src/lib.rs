@@ -30,6 +30,8 @@ mod native {
     #[pymodule_export]
     use super::diag::{NativeDiagnosis, diagnose_path, diagnose_record};
     #[pymodule_export]
+    use super::errors::_panic_inside_the_guard;
+    #[pymodule_export]
     use super::lot::{check_scenario, lot_columns, lot_row};
     #[pymodule_export]
     use super::record::{parse_record_text, read_record, write_record};

@@ -117,3 +117,12 @@ def test_scenario_and_argument_errors(tmp_path, cli):
         paragyro.simulate("identify", effects=["not_an_effect=1"], duration_s=1.0)
     with pytest.raises(ValueError):  # ArgumentError is a ValueError too
         paragyro.simulate("identify", duration_s=-1.0)
+
+
+def test_a_panic_is_an_internal_error():
+    from paragyro import _native
+
+    with pytest.raises(paragyro.InternalError, match="internal error .*: boom"):
+        _native._panic_inside_the_guard("boom")
+    # the interpreter goes on: the module still works
+    assert paragyro.effects()[0][0] == "geometric_nonlinearity"

@@ -141,7 +141,13 @@ fn venv_python(venv: &Path) -> Result<PathBuf, String> {
     run(
         Command::new(&base).args(["-m", "venv"]).arg(venv),
         "python3 -m venv",
-    )?;
+    )
+    .map_err(|e| {
+        format!(
+            "{e}: the venv could not be made (Debian: `apt-get install python3-venv`), or \
+             skip the Python tests with --no-python / PARAGYRO_SKIP_PYTHON=1"
+        )
+    })?;
     Ok(py)
 }
 
