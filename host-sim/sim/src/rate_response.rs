@@ -502,8 +502,37 @@ mod output;
 pub use noise::{allan, noise};
 pub use output::{markdown, write_plots, write_text};
 
-/// Every measurement of the report (the slow part: several closed-loop runs in parallel).
+/// Every measurement of the report (the slow part: several closed-loop runs in parallel),
+/// written to `dir`: report.json, report.md and the plots (`paragyro-sim rate-response`).
 pub fn run_all(o: &Options, dir: &Path) -> Result<(Report, Vec<String>)> {
+    let m = measure(o)?;
+    let mut files = write_text(dir, &m.report)?;
+    files.extend(write_plots(
+        dir,
+        &m.report,
+        &m.step_trace,
+        &m.sine_traces,
+        &m.ramp_trace,
+    )?);
+    Ok((m.report, files))
+}
+
+/// Every measurement of the report, written nowhere (the Python package's
+/// `paragyro.rate_response`); the same figures as [`run_all`]'s.
+pub fn report(o: &Options) -> Result<Report> {
+    measure(o).map(|m| m.report)
+}
+
+/// The report and the traces its plots draw.
+struct Measured {
+    report: Report,
+    step_trace: Vec<TraceRow>,
+    sine_traces: Vec<Vec<TraceRow>>,
+    ramp_trace: Vec<TraceRow>,
+}
+
+/// Runs every measurement (several closed-loop runs in parallel).
+fn measure(o: &Options) -> Result<Measured> {
     type Job<'a> = Box<dyn Fn() -> Result<Part> + Send + Sync + 'a>;
     let jobs: Vec<Job<'_>> = vec![
         Box::new(|| step(o).map(|(r, t)| Part::Step(r, t))),
@@ -545,10 +574,13 @@ pub fn run_all(o: &Options, dir: &Path) -> Result<(Report, Vec<String>)> {
         noise: noise_r,
         allan: allan_r,
     };
-    let mut files = write_text(dir, &report)?;
     let sine_traces: Vec<Vec<TraceRow>> = sn.into_iter().map(|x| x.1).collect();
-    files.extend(write_plots(dir, &report, &step_t, &sine_traces, &ramp_t)?);
-    Ok((report, files))
+    Ok(Measured {
+        report,
+        step_trace: step_t,
+        sine_traces,
+        ramp_trace: ramp_t,
+    })
 }
 
 enum Part {

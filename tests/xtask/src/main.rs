@@ -14,6 +14,10 @@
 //! * `cargo xtask fuzz [--secs N] [TARGET ...]` — the bounded libFuzzer run of `tests/fuzz`
 //!   (module [`fuzz`]); `cargo xtask test` runs it after the tests, 20 s per target
 //!   (`PARAGYRO_FUZZ_SECS` sets another length, `PARAGYRO_SKIP_FUZZ=1` skips it).
+//! * `cargo xtask py [PYTEST ARGS]` — the Python package's tests alone (module [`python`]):
+//!   a venv `target/py-venv` with the pinned packages of `host-sim/py/requirements-test.txt`,
+//!   the package built into it with maturin, then pytest. `cargo xtask test` runs them after
+//!   `cargo test --workspace`; `--no-python` or `PARAGYRO_SKIP_PYTHON=1` skips them.
 //!
 //! `qemu-system-arm` comes from Debian's packages (`apt-get`, as root: CI and these
 //! machines run as root); elsewhere the message says what to install by hand. The
@@ -24,6 +28,7 @@
 #![forbid(unsafe_code)]
 
 mod fuzz;
+mod python;
 
 use std::env;
 use std::process::{Command, ExitCode, Stdio};
@@ -41,9 +46,12 @@ fn main() -> ExitCode {
     let result = match task.as_str() {
         "setup" => setup(),
         "fuzz" => fuzz::fuzz(&args),
+        "py" => python::test(&args),
         "test" => {
             let install = !take_flag(&mut args, "--no-install");
-            (if install { setup() } else { Ok(()) }).and_then(|()| test(&args))
+            let python = !take_flag(&mut args, "--no-python")
+                && env::var_os("PARAGYRO_SKIP_PYTHON").is_none_or(|v| v.is_empty() || v == "0");
+            (if install { setup() } else { Ok(()) }).and_then(|()| test(&args, python))
         }
         "-h" | "--help" | "help" => {
             println!("{}", usage());
@@ -135,13 +143,26 @@ fn setup() -> Result<(), String> {
     Ok(())
 }
 
-/// `cargo test --workspace ARGS`.
-fn test(args: &[String]) -> Result<(), String> {
+/// `cargo test --workspace ARGS`, then (on a full run) the Python tests and the fuzzing.
+fn test(args: &[String], python: bool) -> Result<(), String> {
     let mut all = vec!["test".to_string(), "--workspace".to_string()];
     all.extend(args.iter().cloned());
     let refs: Vec<&str> = all.iter().map(String::as_str).collect();
     say(&format!("cargo {}", refs.join(" ")));
     run(&cargo(), &refs)?;
+    // the Python package (host-sim/py): only on a full run, like the fuzzing
+    if args.is_empty() {
+        if python {
+            let t0 = std::time::Instant::now();
+            python::test(&[])?;
+            say(&format!(
+                "python tests: {:.0} s (venv, packages, build, pytest)",
+                t0.elapsed().as_secs_f64()
+            ));
+        } else {
+            say("python tests: skipped (--no-python or PARAGYRO_SKIP_PYTHON)");
+        }
+    }
     // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
     // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
     if args.is_empty() && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
