@@ -481,9 +481,9 @@ pub struct RateState<T> {
     ring_hold: u32,
     /// The slow RLS is gated until this sample (the rate moved).
     gate_until: u64,
-    /// The current gate was opened or renewed by the rate's acceleration (`fast`), not
-    /// only by its departure from the slow rate.
-    gate_fast: bool,
+    /// The rate's acceleration (`fast`) opened or renewed a gate less than a gate's length
+    /// before this sample.
+    fast_until: u64,
     /// Samples of the current hold that the narrow channel's rate has been still for.
     held: u32,
     /// The hand-over due (Δθ24), 0 if none.
@@ -697,9 +697,10 @@ impl<T: Real> RateState<T> {
             self.moving_until = k + d.gate_len;
         }
         if slow_settled && moved && quad_ok && steady {
-            // a new gate remembers whether the rate's acceleration opened it
-            self.gate_fast = fast || (self.gate_fast && k < self.gate_until);
             self.gate_until = k + d.gate_len;
+            if fast {
+                self.fast_until = self.gate_until;
+            }
             // a hold the slow RLS cannot end (after a step its own departure from the new
             // rate renews the gate): once the narrow channel's rate has stayed within the
             // gate's deviation of its own average for a gate's length, the slow estimate
@@ -726,10 +727,11 @@ impl<T: Real> RateState<T> {
             // slow RLS follows the drift with its walk (modules `drift`, `thermal`; a 20 s
             // warm-up's onset otherwise held the slow RLS for the whole gate while ωy²
             // moved, and the change detector reset it at the gate's end). A gate the
-            // acceleration opened (a step, a sine) holds; at a steady or unknown temperature
-            // every gate runs its length and a change of the device is the change
-            // detector's once it ends (a jump is detected and re-identified either way).
-            if temp_moving && !quad_ok && !self.gate_fast && k < self.gate_until {
+            // acceleration opened or renewed within a gate's length (a step, a sine)
+            // holds; at a steady or unknown temperature every gate runs its length and a
+            // change of the device is the change detector's once it ends (a jump is
+            // detected and re-identified either way).
+            if temp_moving && !quad_ok && k < self.gate_until && k >= self.fast_until {
                 self.gate_until = k;
             }
         }

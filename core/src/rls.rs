@@ -422,12 +422,11 @@ impl<T: Real, const N: usize> Rls<T, N> {
     /// [`RlsSettings::trace_max`]: must be > 0 (`+∞` disables the bound); a NaN or
     /// non-positive value is ignored and `false` returned.
     pub fn set_trace_max(&mut self, trace_max: T) -> bool {
-        let candidate = RlsSettings {
-            trace_max,
-            ..self.settings
-        };
-        if candidate.validate().is_ok() {
-            self.settings = candidate;
+        // the rule of `RlsSettings::validate` for this field alone (the others are the
+        // filter's own, unchanged): one comparison on the tick that learns the bound, which
+        // is a decision's tick too (NaN fails it)
+        if trace_max > T::ZERO {
+            self.settings.trace_max = trace_max;
             true
         } else {
             false

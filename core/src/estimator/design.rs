@@ -166,6 +166,10 @@ pub(crate) struct Fit<T> {
     /// The start-up trace bounds `p0·n·10` (n = 8, 6), lifted to again after a reset.
     pub trace_max1: T,
     pub trace_max2: T,
+    /// `rls.trace_bound_factor` in `T`: the settled trace bound is the trace times it, in
+    /// `T` (for the default 10, exact in `f32`, the same bits as the product in `f64`
+    /// rounded once; no soft-float on the chip's settling tick, which is a decision's).
+    pub trace_bound: T,
     /// Re-linearise every this many samples (0: never).
     pub relin_every: u64,
     /// The change detector of both axes.
@@ -212,6 +216,7 @@ impl<T: Real> Fit<T> {
             lim2: T::from_f64(cfg.rls.p0 * 6.0 * 1.0001),
             trace_max1: T::from_f64(cfg.rls.p0 * 8.0 * 10.0),
             trace_max2: T::from_f64(cfg.rls.p0 * 6.0 * 10.0),
+            trace_bound: T::from_f64(cfg.rls.trace_bound_factor),
             relin_every: (cfg.rls.relinearize_s * cfg.fs_hz) as u64,
             change: ChangeDesign::new(NROWS as f64, m.change_alpha, m.change_threshold, hold),
             walk2: T::ZERO,

@@ -422,9 +422,9 @@ impl<T: Real> State<T> {
             *events |= event::SETTLED;
             self.change_pending = false;
             if !self.bound_learned {
-                let f = d.cfg.rls.trace_bound_factor;
-                let t1 = T::from_f64(self.rls1.trace().to_f64() * f);
-                let t2 = T::from_f64(self.rls2.trace().to_f64() * f);
+                let f = d.fit.trace_bound;
+                let t1 = self.rls1.trace() * f;
+                let t2 = self.rls2.trace() * f;
                 self.rls1.set_trace_max(t1);
                 self.rls2.set_trace_max(t2);
                 self.bound_learned = true;
