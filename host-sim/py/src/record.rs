@@ -33,14 +33,8 @@ impl RecordParts {
         header: &Bound<'_, PyDict>,
         columns: &Bound<'_, PyDict>,
     ) -> Result<Self, Fail> {
-        const KEYS: [&str; 6] = [
-            "f0_hz",
-            "l0_um",
-            "fs_hz",
-            "lockin_lpf_order",
-            "lockin_lpf_hz",
-            "pump_amp_ref_v",
-        ];
+        // the record format's numeric header keys, in its order (`format` first)
+        let keys = &record::HEADER_KEYS[1..];
         let mut numbers = [f64::NAN; 6];
         let mut extra = Vec::new();
         for (k, v) in header.iter() {
@@ -55,7 +49,7 @@ impl RecordParts {
                         record::FORMAT
                     )));
                 }
-            } else if let Some(i) = KEYS.iter().position(|n| *n == key) {
+            } else if let Some(i) = keys.iter().position(|n| *n == key) {
                 numbers[i] = v.extract::<f64>().map_err(|_| {
                     Fail::Argument(format!("header '{key}': expected a number, found {v}"))
                 })?;
@@ -66,7 +60,7 @@ impl RecordParts {
         if let Some(i) = numbers.iter().position(|v| v.is_nan()) {
             return Err(Fail::Argument(format!(
                 "header '{}': required key is missing",
-                KEYS[i]
+                keys[i]
             )));
         }
         let mut cols = Vec::new();
