@@ -17,6 +17,13 @@ pub struct Args {
     /// Output directory (created if needed).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub opts: DiagnoseOpts,
+}
+
+/// The diagnosis's options on the command line (`diagnose` and `lot`).
+#[derive(clap::Args, Debug)]
+pub struct DiagnoseOpts {
     /// The simulator configuration to compare with: a built-in scenario name or a
     /// scenario TOML (its plant at t = 0); default Table 2.
     #[arg(long, value_name = "SCENARIO")]
@@ -31,18 +38,26 @@ pub struct Args {
     pub confirm_runs: usize,
 }
 
+impl DiagnoseOpts {
+    /// The diagnosis's [`Options`] (the model loaded from its scenario).
+    pub fn options(&self) -> Result<Options, Failure> {
+        let mut opts = Options {
+            resimulate: !self.no_resim,
+            confirm_runs: self.confirm_runs,
+            ..Default::default()
+        };
+        if let Some(m) = &self.model {
+            opts.model = Model::from_scenario(&load(m)?);
+        }
+        Ok(opts)
+    }
+}
+
 /// Diagnoses the record, writes the report, prints the verdict and the top candidates.
 pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     let file = &a.record;
     let rec = read_record_warn(file)?;
-    let mut opts = Options {
-        resimulate: !a.no_resim,
-        confirm_runs: a.confirm_runs,
-        ..Default::default()
-    };
-    if let Some(m) = &a.model {
-        opts.model = Model::from_scenario(&load(m)?);
-    }
+    let opts = a.opts.options()?;
     note(&format!(
         "diagnosing {} ({} samples, {:.1} s){}",
         file.display(),

@@ -7,10 +7,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use paragyro_diagnose::diagnose::{Model, Options};
 use paragyro_lot::{LotOptions, LotRow, LotSummary, Spec};
 
-use super::{Ctx, EXIT_LOAD, EXIT_RUN, Failure, fail, load, note};
+use super::{Ctx, EXIT_LOAD, EXIT_RUN, Failure, fail, note};
 
 /// Diagnose every record of a folder (one row per device in a Parquet file), with the
 /// devices' reports and the lot report against a spec.
@@ -35,15 +34,8 @@ pub struct Args {
     /// Records diagnosed at once (threads); 0: one per core.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub jobs: usize,
-    /// The simulator configuration to compare with (as `diagnose --model`).
-    #[arg(long, value_name = "SCENARIO")]
-    pub model: Option<String>,
-    /// Skip the re-simulation (no output error, faster).
-    #[arg(long)]
-    pub no_resim: bool,
-    /// Whole-record re-simulations the confirmation may make per record (as `diagnose`).
-    #[arg(long, value_name = "N", default_value_t = paragyro_diagnose::diagnose::confirm::CONFIRM_RUNS)]
-    pub confirm_runs: usize,
+    #[command(flatten)]
+    pub opts: super::diagnose::DiagnoseOpts,
 }
 
 /// Redraw the lot report from a lot's Parquet file.
@@ -86,14 +78,7 @@ fn bar(ctx: &Ctx, n: usize) -> ProgressBar {
 /// be read, or no record could be read; errors of single records are rows.
 pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     let spec = load_spec(a.spec.as_deref())?;
-    let mut diag = Options {
-        resimulate: !a.no_resim,
-        confirm_runs: a.confirm_runs,
-        ..Default::default()
-    };
-    if let Some(m) = &a.model {
-        diag.model = Model::from_scenario(&load(m)?);
-    }
+    let diag = a.opts.options()?;
     let paths = paragyro_lot::find_records(&a.dir).map_err(fail(EXIT_LOAD))?;
     if paths.is_empty() {
         return Err(Failure {
