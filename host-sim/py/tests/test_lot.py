@@ -151,3 +151,20 @@ def test_the_clis_lot_gives_the_same_rows(lot_paths, tmp_path, cli):
     timing = [c for c in ours.columns if c == "seconds" or c.startswith("time_")]
     assert len(timing) >= 9
     pd.testing.assert_frame_equal(ours.drop(columns=timing), theirs.drop(columns=timing))
+
+
+def test_a_scheduler_address_runs_the_lot_on_that_cluster(lot_paths, client):
+    """A scheduler address (as for a real cluster) connects a client of its own to it: the
+    same rows as with the client object, the tasks ran on that cluster's workers, and the
+    cluster is left running (only the lot's own client is closed)."""
+    addr = client.scheduler.address
+    assert isinstance(addr, str) and addr.startswith("tcp://")
+    before = sum(client.run(lambda dask_worker: len(dask_worker.data) + dask_worker.state.executed_count).values())
+    by_address = paragyro.lot.diagnose(lot_paths[:3], client=addr, resimulate=False)
+    after = sum(client.run(lambda dask_worker: len(dask_worker.data) + dask_worker.state.executed_count).values())
+    assert after >= before + 3, (before, after)
+    assert client.status == "running" and len(client.scheduler_info()["workers"]) == 2
+    by_client = paragyro.lot.diagnose(lot_paths[:3], client=client, resimulate=False)
+    timing = [c for c in by_client.columns if c == "seconds" or c.startswith("time_")]
+    pd.testing.assert_frame_equal(by_address.drop(columns=timing), by_client.drop(columns=timing))
+    assert list(by_address["verdict"][1:]) == ["nonlinear_damping", "feedthrough"]
