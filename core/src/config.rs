@@ -57,7 +57,7 @@ pub struct DitherConfig {
 /// Recursive least squares settings (both axes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RlsConfig {
-    /// Forgetting factor per 500 Hz sample (0.9998 ⇔ 10 s memory). Applied only while the
+    /// Forgetting factor per 500 Hz sample (0.999 ⇔ 2 s memory). Applied only while the
     /// excitation is sufficient (`monitor.excitation_min_fraction`); once the dither has
     /// been seen, a sample without it is not forgotten over (λ = 1, `rls.rs` "Anti-windup").
     pub forgetting: f64,
@@ -263,7 +263,7 @@ const TABLE2_CONFIG: Config = Config {
     row_sigma_drive: DEFAULT_ROW_SIGMA_DRIVE,
     row_sigma_sense: DEFAULT_ROW_SIGMA_SENSE,
     rls: RlsConfig {
-        forgetting: 0.9998,
+        forgetting: 0.999,
         p0: 1e4,
         p_reset: 1.0,
         trace_bound_factor: 10.0,

@@ -43,8 +43,9 @@
 //! device's and its dither's, not the drift's): the drift is measured again from a settled
 //! estimate two windows after the reset (a re-identification's corrections are not a
 //! drift), and a drift that went on through the reset stands out of the kept wander within
-//! a window. Relearned after each reset from a drifting device, the wander would take the
-//! drift for itself, and each reset would bring the next.
+//! a window. Relearning the wander after each reset from a drifting device took the drift
+//! for wander, and every reset was followed by the next (a 10 K warm-up over 300 s without
+//! the die temperature: hundreds of resets).
 //!
 //! * **The drive from the sense.** The drive's rows resolve θ12 several times less well
 //!   than the sense's θ22, and the dither wanders its corrections more: a warm-up's
@@ -60,10 +61,10 @@
 //! drift changes); the drive's θ12 and the sense's θ22 are the only columns that walk (the
 //! damping's temperature coefficient is not tracked); without a die temperature a ramp that
 //! starts suddenly (0 → 33 ppm/s within a sample) before its drift stands out can be read
-//! as a jump (the slow RLS's 10 s memory lags it within a fraction of a second), and while
-//! the resets come faster than the two quiet windows after each, the drift is not measured
-//! and they go on (the 20 s warm-up on 3 of 6 seeds, `warm-up-cycle.toml`'s cooling ramp);
-//! with the die temperature its rate opens the walk at once (module [`crate::thermal`]).
+//! as a jump, and while the resets come faster than the two quiet windows after each, the
+//! drift is not measured and they go on (`host-sim/scenarios/warm-up-cycle.toml`'s cooling
+//! ramp); with the die temperature its rate opens the walk at once (module
+//! [`crate::thermal`]).
 
 use crate::real::Real;
 

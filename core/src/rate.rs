@@ -4,7 +4,7 @@
 //! # Why a second channel
 //!
 //! The rate lives in θ14 = −(μxy − 2γ) and θ24 = −(μxy + 2γ). The slow RLS (memory
-//! λ = 0.9998 ≈ 10 s, 10 Hz state-variable filter) is right only while the rate stands
+//! λ = 0.999 ≈ 2 s, 10 Hz state-variable filter) is right only while the rate stands
 //! still.
 //!
 //! # The fast row
@@ -581,7 +581,7 @@ impl<T: Real> RateState<T> {
     /// The rate's zero, μxy, every [`ZERO_EVERY`] samples: the slow RLS's μ̂xy (from its
     /// deviations `dev14`, `dev24`) averaged over the settled samples since its last reset,
     /// with weight `1/n` down to `rate.zero_memory_s`'s. The cross-damping does not move
-    /// with temperature, and the slow RLS's 10 s memory would pass its estimation noise
+    /// with temperature, and the slow RLS's 2 s memory would pass its estimation noise
     /// (mostly the drive's θ14: a tenth of a °/s over 10 s) into the rate's low
     /// frequencies. Until the first settled sample after a reset the zero follows the slow
     /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held.
@@ -819,7 +819,7 @@ impl<T: Real> RateState<T> {
 pub struct RateOutput {
     /// The fast rate, °/s (every sample; see [`RateOutput::valid`]).
     pub rate_dps: f64,
-    /// The slow rate, °/s: the fast one averaged over the slow RLS memory (≈ 10 s).
+    /// The slow rate, °/s: the fast one averaged over the slow RLS memory (≈ 2 s).
     pub rate_slow_dps: f64,
     /// The quadrature (ωxy² + γ′) as a rate-equivalent, °/s: ωxy²/(2ω)·ω0 — the error
     /// term a real gyro fights; it is in phase with the drive displacement, the rate

@@ -68,10 +68,10 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
         "learned TCFs {tcf:?} ppm/K (truth −30, −33)"
     );
 
-    // without the sensor nothing is learned (and the walk alone does not hold this ramp's
-    // sudden onset on every seed: the next test)
+    // without the sensor the walk alone follows the same ramp
     sc.temperature.as_mut().expect("a profile").sensor = false;
     let walk = run_f32(&sc);
+    assert_eq!(resets_after(&walk, 2.5), 0, "resets without the sensor");
     assert!(
         walk.trace
             .iter()
@@ -91,31 +91,22 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
     // seeds 2 and 5 the narrow rate channel's in-phase deviation crosses its gate before
     // the quadrature's at the onset: the gate that opens ends as the quadrature departs too
     // (core `rate`, a drift, not a move of the rate); held for its whole 0.3 s, the change
-    // detector would reset both axes at its end.
-    // Without the sensor the walk alone holds the onset of the 40 s warm-up (0 → 16 ppm/s
-    // on ω_y² within a sample) on every seed: the wander learned before a reset is kept
-    // and the drive walks with the sense's drift (core `drift`). The 20 s warm-up's (0 →
-    // 33 ppm/s) is read as jumps on seeds 1, 4 and 5 (host-sim/docs/benchmarks.md).
+    // detector reset both axes at its end and the rate was valid on 81 % of seed 5's ramp.
+    // Without the sensor the walk alone holds the onset on every seed: the wander learned
+    // before a reset is kept and the drive walks with the sense's drift (core `drift`;
+    // seeds 2, 3, 4 and 6 gave 164-167 resets when each reset relearned the wander).
     let mut seen = Vec::new();
     for seed in 1..=6 {
         for sensor in [true, false] {
             let mut sc = warm_up();
             sc.seed = seed;
-            let t = sc.temperature.as_mut().expect("a profile");
-            t.sensor = sensor;
-            let end = if sensor {
-                25.0
-            } else {
-                t.points = vec![[0.0, 25.0], [5.0, 25.0], [45.0, 35.0]];
-                sc.duration_s = 47.0;
-                45.0
-            };
+            sc.temperature.as_mut().expect("a profile").sensor = sensor;
             let r = run_f32(&sc);
             seen.push((
                 seed,
                 sensor,
                 resets_after(&r, 2.5),
-                valid_share(&r, 5.0, end),
+                valid_share(&r, 5.0, 25.0),
             ));
         }
     }
@@ -127,10 +118,11 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
 
 #[test]
 fn without_the_die_temperature_a_slow_warm_up_is_followed_by_the_walk_alone() {
-    // 10 K over 100 s (0.1 K/s; ω_x² −6.0 ppm/s, ω_y² −6.6 ppm/s) without the sensor: a
-    // reset keeps the drift tracker's wander (relearned from the drifting device, it would
-    // take the drift for wander and each reset would bring the next) and the drive walks
-    // with the sense's drift where its own does not stand out (core `drift`).
+    // 10 K over 100 s (0.1 K/s; ω_x² −1.8 ppm/s, ω_y² −6.6 ppm/s) without the sensor: the
+    // drive's drift does not stand out of its own wander, and with the forgetting alone
+    // its lag reached the change detector, whose resets each relearned the wander from the
+    // drifting device (98 resets, the rate valid on 75 % of the ramp). Now the drive walks
+    // with the sense's measured drift and a reset keeps the wander (core `drift`).
     let mut sc = warm_up();
     let t = sc.temperature.as_mut().expect("a profile");
     t.points = vec![[0.0, 25.0], [5.0, 25.0], [105.0, 35.0]];
@@ -144,12 +136,12 @@ fn without_the_die_temperature_a_slow_warm_up_is_followed_by_the_walk_alone() {
         "rate valid on {:.2} % of the ramp",
         100.0 * valid
     );
-    // both drift columns walk with a measured drift (θ22 = −(ω_y² − γ²) rising at 6.6
-    // ppm/s of itself, θ12 at about 6.0)
+    // the drive walks with the sense's measured drift (θ22 = −(ω_y² − γ²) rising at
+    // 6.6 ppm/s of itself)
     let mid = r.trace.iter().find(|x| x.t_s >= 55.0).expect("in the run");
     let [d12, d22] = mid.drift_ppm_s;
     assert!(
-        (d12 - 6.3).abs() < 1.5 && (d22 - 6.6).abs() < 1.0,
+        d12 == d22 && (d22 - 6.6).abs() < 1.0,
         "{:?}",
         mid.drift_ppm_s
     );
@@ -202,10 +194,10 @@ fn a_temperature_cycle_is_followed_with_the_die_temperature() {
         "rate valid on {:.1} % of the ramps",
         100.0 * valid
     );
-    // the walk alone does not hold it: a ramp that starts within a sample (0 → ±33 ppm/s)
-    // before its drift stands out is read as a jump, and the resets come faster than the
-    // two quiet windows after each, in which the drift is not measured (core `drift`,
-    // "Limits"; seed 1: from the warming onset, 339 resets)
+    // the walk alone does not hold the way back: the cooling ramp's sudden onset (0 →
+    // −33 ppm/s within a sample, before its drift stands out) is read as a jump, and the
+    // resets come faster than the two quiet windows after each, in which the drift is not
+    // measured (core `drift`, "Limits"; 170 resets on seed 1)
     sc.temperature.as_mut().expect("a profile").sensor = false;
     let walk = run_f32(&sc);
     let resets = resets_after(&walk, 2.5);

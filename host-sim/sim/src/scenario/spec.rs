@@ -386,7 +386,7 @@ pub struct EstimatorSpec {
 impl Default for EstimatorSpec {
     fn default() -> Self {
         Self {
-            forgetting: 0.9998,
+            forgetting: 0.999,
             pump_centre_hz: None,
             dither_pump_hz: 21.6,
             dither_freq_hz: 5.0,
