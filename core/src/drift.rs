@@ -43,9 +43,8 @@
 //! device's and its dither's, not the drift's): the drift is measured again from a settled
 //! estimate two windows after the reset (a re-identification's corrections are not a
 //! drift), and a drift that went on through the reset stands out of the kept wander within
-//! a window. Relearning the wander after each reset from a drifting device took the drift
-//! for wander, and every reset was followed by the next (a 10 K warm-up over 300 s without
-//! the die temperature: hundreds of resets).
+//! a window. Relearned after each reset from a drifting device, the wander would take the
+//! drift for itself, and each reset would bring the next.
 //!
 //! * **The drive from the sense.** The drive's rows resolve θ12 several times less well
 //!   than the sense's θ22, and the dither wanders its corrections more: a warm-up's

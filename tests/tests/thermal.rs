@@ -91,10 +91,10 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
     // seeds 2 and 5 the narrow rate channel's in-phase deviation crosses its gate before
     // the quadrature's at the onset: the gate that opens ends as the quadrature departs too
     // (core `rate`, a drift, not a move of the rate); held for its whole 0.3 s, the change
-    // detector reset both axes at its end and the rate was valid on 81 % of seed 5's ramp.
-    // Without the sensor the walk alone holds the onset on every seed: the wander learned
-    // before a reset is kept and the drive walks with the sense's drift (core `drift`;
-    // seeds 2, 3, 4 and 6 gave 164-167 resets when each reset relearned the wander).
+    // detector would reset both axes at its end. Without the sensor the walk alone holds
+    // the onset on every seed: the wander learned before a reset is kept (relearned from
+    // the drifting device, it would take the drift for wander and each reset would bring
+    // the next) and the drive walks with the sense's drift (core `drift`).
     let mut seen = Vec::new();
     for seed in 1..=6 {
         for sensor in [true, false] {
@@ -118,11 +118,10 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
 
 #[test]
 fn without_the_die_temperature_a_slow_warm_up_is_followed_by_the_walk_alone() {
-    // 10 K over 100 s (0.1 K/s; ω_x² −1.8 ppm/s, ω_y² −6.6 ppm/s) without the sensor: the
+    // 10 K over 100 s (0.1 K/s; ω_x² −6.0 ppm/s, ω_y² −6.6 ppm/s) without the sensor: the
     // drive's drift does not stand out of its own wander, and with the forgetting alone
-    // its lag reached the change detector, whose resets each relearned the wander from the
-    // drifting device (98 resets, the rate valid on 75 % of the ramp). Now the drive walks
-    // with the sense's measured drift and a reset keeps the wander (core `drift`).
+    // its lag would reach the change detector; the drive walks with the sense's measured
+    // drift, and a reset keeps the wander (core `drift`).
     let mut sc = warm_up();
     let t = sc.temperature.as_mut().expect("a profile");
     t.points = vec![[0.0, 25.0], [5.0, 25.0], [105.0, 35.0]];
@@ -197,7 +196,7 @@ fn a_temperature_cycle_is_followed_with_the_die_temperature() {
     // the walk alone does not hold the way back: the cooling ramp's sudden onset (0 →
     // −33 ppm/s within a sample, before its drift stands out) is read as a jump, and the
     // resets come faster than the two quiet windows after each, in which the drift is not
-    // measured (core `drift`, "Limits"; 170 resets on seed 1)
+    // measured (core `drift`, "Limits")
     sc.temperature.as_mut().expect("a profile").sensor = false;
     let walk = run_f32(&sc);
     let resets = resets_after(&walk, 2.5);
