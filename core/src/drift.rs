@@ -182,7 +182,7 @@ impl<T: Real> DriftTracker<T> {
     /// else 0; 0 before a window of updates, and beyond `vmax` (a jump).
     ///
     /// The drive's, where its own does not stand out and no temperature predicts it, is
-    /// the sense's ([`DriftTracker::borrowed`]): both modes of one structure move with one
+    /// the sense's: both modes of one structure move with one
     /// temperature, and the sense's rows measure it several times better.
     #[inline(always)]
     pub fn drift(&self, d: &DriftDesign<T>, axis: usize) -> T {
