@@ -186,20 +186,20 @@ impl<T: Real> DriftTracker<T> {
     /// temperature, and the sense's rows measure it several times better.
     #[inline(always)]
     pub fn drift(&self, d: &DriftDesign<T>, axis: usize) -> T {
-        let own = self.measured(d, axis);
-        if self.borrowed(axis, own) {
-            self.measured(d, 1)
-        } else {
-            own
-        }
+        self.drift_borrowed(d, axis).0
     }
 
-    /// The drive (`axis` 0) takes the sense's measured drift: its own `own` is 0 and no
-    /// temperature predicts it (without a die temperature the sense's frequency is the
-    /// thermometer).
+    /// [`DriftTracker::drift`], and whether it is the sense's taken for the drive (`axis`
+    /// 0: its own is 0 and no temperature predicts it; without a die temperature the
+    /// sense's frequency is the thermometer).
     #[inline(always)]
-    fn borrowed(&self, axis: usize, own: T) -> bool {
-        axis == 0 && own == T::ZERO && self.known[0] == T::ZERO
+    fn drift_borrowed(&self, d: &DriftDesign<T>, axis: usize) -> (T, bool) {
+        let own = self.measured(d, axis);
+        if axis == 0 && own == T::ZERO && self.known[0] == T::ZERO {
+            (self.measured(d, 1), true)
+        } else {
+            (own, false)
+        }
     }
 
     /// [`DriftTracker::drift`] from the axis's own corrections alone.
@@ -266,15 +266,16 @@ impl<T: Real> DriftTracker<T> {
     /// drift's and the temperature prediction's uncertainty's.
     #[inline(always)]
     pub fn q(&self, d: &DriftDesign<T>, axis: usize) -> T {
-        let own = self.measured(d, axis);
+        let (u, borrowed) = self.drift_borrowed(d, axis);
         let var = self.known_var.get(axis).copied().unwrap_or(T::ZERO);
-        if self.borrowed(axis, own) {
-            // the sense's drift, with the modes' unknown ratio of TCFs (1 ± BORROW_SIGMA)
-            let u = self.measured(d, 1);
-            d.kappa2 * (u * u * T::from_f64(1.0 + BORROW_SIGMA * BORROW_SIGMA) + var)
+        // the sense's drift taken for the drive: the modes' unknown ratio of TCFs
+        // (1 ± BORROW_SIGMA) adds to its variance
+        let u2 = if borrowed {
+            u * u * T::from_f64(1.0 + BORROW_SIGMA * BORROW_SIGMA)
         } else {
-            d.kappa2 * (own * own + var)
-        }
+            u * u
+        };
+        d.kappa2 * (u2 + var)
     }
 
     /// Forgets the measured drift (a covariance reset): the re-identification's
