@@ -243,6 +243,9 @@ pub struct RateDesign<T> {
     /// The smallest weight of the rate's zero's mean, [`ZERO_EVERY`]/(`rate.zero_memory_s`·fs)
     /// (1: none).
     zero_alpha: T,
+    /// The zero's updates left out after the slow estimate was last unsettled: one slow
+    /// memory, `1/(1 − rls.forgetting)` samples, in [`ZERO_EVERY`]s.
+    zero_quiet: u32,
 }
 
 impl<T: Real> RateDesign<T> {
@@ -286,6 +289,10 @@ impl<T: Real> RateDesign<T> {
             } else {
                 1.0
             }),
+            zero_quiet: libm::ceil(
+                (1.0 / (1.0 - cfg.rls.forgetting)).min(cfg.rate.zero_memory_s * cfg.fs_hz)
+                    / ZERO_EVERY as f64,
+            ) as u32,
         }
     }
 
@@ -334,6 +341,8 @@ struct NominalSlow<T> {
     zero_dev: T,
     /// Settled updates in that mean since the last reset (0: it follows the slow RLS).
     zero_n: T,
+    /// Updates of the zero still left out since the slow estimate was last unsettled.
+    zero_wait: u32,
     th24: T,
     /// The θ_nom components it was formed from (bit patterns; `None`: not yet).
     stamp: Option<[u64; 6]>,
@@ -557,6 +566,7 @@ impl<T: Real> RateState<T> {
             mu_nom,
             zero_dev,
             zero_n: self.nom.zero_n,
+            zero_wait: self.nom.zero_wait,
             th24: T::from_f64(th2n[3]),
             stamp: Some(key),
         };
@@ -584,18 +594,29 @@ impl<T: Real> RateState<T> {
     /// with temperature, and the slow RLS's 2 s memory would pass its estimation noise
     /// (mostly the drive's θ14: a tenth of a °/s over 10 s) into the rate's low
     /// frequencies. Until the first settled sample after a reset the zero follows the slow
-    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held.
+    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held, and
+    /// once the mean has started, for one slow memory after too: θ14 and θ24 re-converge at their own speeds after a
+    /// rate step (the drive's rows resolve the rate less well), and their sum carries the
+    /// step until they have.
     #[inline(always)]
     pub fn hold_zero(&mut self, d: &RateDesign<T>, dev14: T, dev24: T, settled: bool) {
         let n = &mut self.nom;
         let mu_dev = -T::from_f64(0.5) * (dev14 + dev24);
-        if settled {
+        if !settled && n.zero_n > T::ZERO {
+            n.zero_wait = d.zero_quiet;
+        }
+        if settled && n.zero_wait == 0 {
             n.zero_n += T::ONE;
             let a = T::ONE / n.zero_n;
             let a = if a > d.zero_alpha { a } else { d.zero_alpha };
             n.zero_dev += a * (mu_dev - n.zero_dev);
-        } else if n.zero_n == T::ZERO {
-            n.zero_dev = mu_dev;
+        } else {
+            if settled {
+                n.zero_wait = n.zero_wait.saturating_sub(1);
+            }
+            if n.zero_n == T::ZERO {
+                n.zero_dev = mu_dev;
+            }
         }
         n.mu_xy = n.mu_nom + n.zero_dev;
     }
@@ -603,6 +624,7 @@ impl<T: Real> RateState<T> {
     /// A covariance reset: the rate's zero follows the slow RLS again until it settles.
     pub fn restart_zero(&mut self) {
         self.nom.zero_n = T::ZERO;
+        self.nom.zero_wait = 0;
     }
 
     /// One sample: filters the row in both channels and solves it (when the drive is
@@ -857,5 +879,37 @@ mod tests {
         }
         let want = 1.0 / (2.0 * POST_ZETA);
         assert!((peak - want).abs() < 0.01 * want, "{peak} against {want}");
+    }
+
+    /// After the slow estimate was unsettled (a gate) the zero's mean is held for one slow
+    /// memory (`1/(1 − λ)` samples): a re-converging μ̂xy in that time does not enter it, one
+    /// after it does; after a reset the mean starts at the first settled sample.
+    #[test]
+    fn the_zero_is_held_for_one_slow_memory_after_a_gate() {
+        let cfg = Config::table2();
+        let d = RateDesign::<f64>::of(&cfg);
+        let memory = 1.0 / (1.0 - cfg.rls.forgetting);
+        assert_eq!(d.zero_quiet as f64, libm::ceil(memory / ZERO_EVERY as f64));
+        let mut s = RateState::new(&d);
+        // settled: the mean takes μ̂xy's deviation (dev14 = dev24 = −1e-6: μ = +1e-6)
+        for _ in 0..10 {
+            s.hold_zero(&d, -1e-6, -1e-6, true);
+        }
+        let held = s.nom.zero_dev;
+        assert!((held - 1e-6).abs() < 1e-18, "{held}");
+        // a gate, then a re-convergence 1e-5 off for one memory: held throughout
+        s.hold_zero(&d, 0.0, 0.0, false);
+        for _ in 0..d.zero_quiet {
+            s.hold_zero(&d, -1e-5, -1e-5, true);
+            assert_eq!(s.nom.zero_dev, held);
+        }
+        // then averaged again
+        s.hold_zero(&d, -1e-5, -1e-5, true);
+        assert!(s.nom.zero_dev > held, "{} after the memory", s.nom.zero_dev);
+        // after a reset the zero follows the slow RLS until the mean starts again
+        s.restart_zero();
+        s.hold_zero(&d, 0.0, 0.0, false);
+        s.hold_zero(&d, -3e-6, -3e-6, true);
+        assert!((s.nom.zero_dev - 3e-6).abs() < 1e-18, "{}", s.nom.zero_dev);
     }
 }
