@@ -94,8 +94,11 @@ use crate::drivers::adxl355::Adxl355;
 
 mod pump;
 mod temp;
+mod words;
+
 pub use pump::{PumpAmplitude, PumpGuard, half_steps};
 pub use temp::{TEMP_EVERY, TEMP_PLAUSIBLE_C, plausible_temp_c};
+use words::f64_round_u32;
 
 /// The board's IO_UPDATE line of the AD9959 (a rising edge applies the buffered words).
 ///
@@ -339,33 +342,6 @@ fn lockin(x: [f32; LOCKIN_CHANNELS], y: [f32; LOCKIN_CHANNELS]) -> Lockin<f32> {
 
 fn bump(c: &mut u32) {
     *c = c.saturating_add(1);
-}
-
-/// `y as u32` (saturating: NaN and negatives give 0, ≥ 2^32 gives `u32::MAX`) from the
-/// bits, with integer operations only: `floor(y)` of a double in [1, 2^32) is its 53-bit
-/// significand shifted right by `1075 − exponent` (on the chip the `as` cast is a library
-/// conversion plus two soft-float comparisons).
-fn f64_as_u32(y: f64) -> u32 {
-    let b = y.to_bits();
-    if b >> 63 != 0 {
-        return 0; // negative (→ 0 when > −1, saturated to 0 below) or a negative NaN
-    }
-    let exp = (b >> 52) as u32; // biased, sign bit clear
-    if exp < 1023 {
-        return 0; // [0, 1)
-    }
-    if exp >= 1023 + 32 {
-        // ≥ 2^32 or ∞ → MAX; NaN → 0
-        return if exp == 0x7FF && b & ((1 << 52) - 1) != 0 {
-            0
-        } else {
-            u32::MAX
-        };
-    }
-    let sig = (b & ((1 << 52) - 1)) | (1 << 52);
-    // exp − 1023 ∈ [0, 31]: shift ∈ [21, 52]
-    let shift = 1075u32.saturating_sub(exp);
-    u32::try_from(sig.checked_shr(shift).unwrap_or(0)).unwrap_or(u32::MAX)
 }
 
 /// One axis: the frame in µm, saturated channels beyond the core's full scale, or all
@@ -839,9 +815,9 @@ where
         // = pump_hz · 0.5 · 2^32 / sysclk bit for bit: both divide the same exact
         // quotient's operands scaled by powers of two, rounded once
         let x = pump_hz / self.hz_per_ref_word;
-        // saturating cast: NaN and negatives give 0, overflow u32::MAX (from the bits: the
-        // `as` cast costs two soft-float comparisons besides the conversion)
-        let k = f64_as_u32(x + 0.5);
+        // round half up, saturating: NaN and negatives give 0, overflow u32::MAX (from the
+        // bits: the `as` cast costs two soft-float comparisons besides the conversion)
+        let k = f64_round_u32(x);
         let (lo, hi) = self.guard_words;
         // `max`/`min`, not `clamp`: the same word for lo ≤ hi (a validated guard), and no
         // panic path (`clamp`'s `min > max` message kept `core::fmt` in the image)
@@ -1021,51 +997,6 @@ mod tests {
             .map(|xy| s.push(xy))
             .collect();
         assert_eq!(seen, [false, false, true, true, false, false, true]);
-    }
-
-    /// `f64_as_u32` is the saturating `as u32` cast.
-    #[test]
-    fn f64_as_u32_equals_the_cast() {
-        let mut probes = vec![
-            0.0,
-            -0.0,
-            0.5,
-            0.999_999_999,
-            1.0,
-            1.5,
-            2.0,
-            4_294_967_295.0,
-            4_294_967_295.5,
-            4_294_967_296.0,
-            1e300,
-            f64::MAX,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            -0.5,
-            -1.0,
-            -1e300,
-            f64::MIN_POSITIVE,
-            5e-324,
-        ];
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        for _ in 0..200_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            probes.push(f64::from_bits(x));
-            probes.push((x >> 11) as f64 / (1u64 << 21) as f64); // [0, 2^32)
-        }
-        for e in 0..=33 {
-            let p = (1u64 << e) as f64;
-            for b in [p.to_bits() - 1, p.to_bits(), p.to_bits() + 1] {
-                probes.push(f64::from_bits(b));
-            }
-        }
-        for y in probes {
-            assert_eq!(f64_as_u32(y), y as u32, "{y:e} ({:#x})", y.to_bits());
-        }
     }
 
     /// The realised pump from the reference word and `hz_per_ref_word` equals
