@@ -52,6 +52,24 @@ pub(super) fn f64_round_u32(x: f64) -> u32 {
 mod tests {
     use super::*;
 
+    /// Doubles every conversion is probed at: the largest, the infinities, both NaNs, −½.
+    const SPECIAL: [f64; 6] = [
+        f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+        -f64::NAN,
+        -0.5,
+    ];
+
+    /// The next xorshift state's bits as a double, and a double in [0, 2^32) from them.
+    fn random_doubles(x: &mut u64) -> [f64; 2] {
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        [f64::from_bits(*x), (*x >> 11) as f64 / (1u64 << 21) as f64]
+    }
+
     /// `f64_as_u32` is the saturating `as u32` cast.
     #[test]
     fn f64_as_u32_equals_the_cast() {
@@ -67,24 +85,15 @@ mod tests {
             4_294_967_295.5,
             4_294_967_296.0,
             1e300,
-            f64::MAX,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            -0.5,
             -1.0,
             -1e300,
             f64::MIN_POSITIVE,
             5e-324,
         ];
+        probes.extend(SPECIAL);
         let mut x = 0x9E37_79B9_7F4A_7C15u64;
         for _ in 0..200_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            probes.push(f64::from_bits(x));
-            probes.push((x >> 11) as f64 / (1u64 << 21) as f64); // [0, 2^32)
+            probes.extend(random_doubles(&mut x));
         }
         for e in 0..=33 {
             let p = (1u64 << e) as f64;
@@ -111,21 +120,12 @@ mod tests {
             4_294_967_294.5,
             4_294_967_295.499_999,
             4_294_967_295.5,
-            f64::MAX,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            -0.5,
             5e-324,
         ];
+        probes.extend(SPECIAL);
         let mut x = 0x2545_F491_4F6C_DD1Du64;
         for _ in 0..200_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            probes.push(f64::from_bits(x));
-            probes.push((x >> 11) as f64 / (1u64 << 21) as f64); // [0, 2^32)
+            probes.extend(random_doubles(&mut x));
             // a pump's words: 2^25..2^27 with a random fraction, and near a half
             let w = ((x >> 37) | (1 << 25)) as f64;
             let h = (w + 0.5).to_bits();
