@@ -594,10 +594,10 @@ impl<T: Real> RateState<T> {
     /// with temperature, and the slow RLS's 2 s memory would pass its estimation noise
     /// (mostly the drive's θ14: a tenth of a °/s over 10 s) into the rate's low
     /// frequencies. Until the first settled sample after a reset the zero follows the slow
-    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held, and
-    /// once the mean has started, for one slow memory after too: θ14 and θ24 re-converge at their own speeds after a
-    /// rate step (the drive's rows resolve the rate less well), and their sum carries the
-    /// step until they have.
+    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held,
+    /// and once the mean has started, for one slow memory after too: θ14 and θ24
+    /// re-converge at their own speeds after a rate step (the drive's rows resolve the rate
+    /// less well), and their sum carries the step until they have.
     #[inline(always)]
     pub fn hold_zero(&mut self, d: &RateDesign<T>, dev14: T, dev24: T, settled: bool) {
         let n = &mut self.nom;
