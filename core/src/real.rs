@@ -74,6 +74,13 @@ pub trait Real:
     fn from_f64_diff(a: f64, b: f64) -> Self {
         Self::from_f64(a - b)
     }
+    /// `c + o.to_f64()`, the same double; for `f32`, where `o`'s bits lie on `c`'s grid
+    /// (the pump's dither on its centre), from the bits with integer operations (on the
+    /// chip the widening and the double addition are ≈ 110 instructions of soft float).
+    #[inline]
+    fn add_to_f64(c: f64, o: Self) -> f64 {
+        c + o.to_f64()
+    }
     /// Square root (libm).
     fn sqrt(self) -> Self;
     /// Absolute value.
@@ -162,6 +169,45 @@ fn same_binade_diff_f32(a: f64, b: f64) -> Option<f32> {
     Some(if neg { -v } else { v })
 }
 
+/// `c + o as f64` for a positive normal `c` and a normal `o` whose last bit lies on `c`'s
+/// grid and below a quarter of `c` (or `o` = ±0), `None` otherwise. The exact sum is then an
+/// integer number of `c`'s units between 2^51 and 2^53 + 2^51: exact below 2^53, above it
+/// one bit dropped, to nearest, ties to even, as the addition rounds it.
+#[inline]
+fn f32_on_grid_sum(c: f64, o: f32) -> Option<f64> {
+    let bc = c.to_bits();
+    let ec = (bc >> 52) as i32; // with the sign bit: a negative c is ≥ 2048
+    if !(2..0x7FE).contains(&ec) {
+        return None;
+    }
+    let bo = o.to_bits();
+    if bo & 0x7FFF_FFFF == 0 {
+        return Some(c);
+    }
+    let eo = ((bo >> 23) & 0xFF) as i32;
+    // o = mo·2^(eo − 150), c = mc·2^(ec − 1075): o's unit in c's units is 2^sh
+    let sh = (eo - 150) - (ec - 1075);
+    if eo == 0 || eo == 0xFF || !(0..=27).contains(&sh) {
+        return None;
+    }
+    let mo = i64::from((bo & 0x7F_FFFF) | 0x80_0000) << sh; // < 2^51
+    let mc = ((bc & ((1 << 52) - 1)) | (1 << 52)) as i64;
+    let m = if bo >> 31 != 0 { mc - mo } else { mc + mo };
+    let (m, e) = if m >= 1 << 53 {
+        // one bit dropped, exactly half a unit when set: up to even (m < 2^53 + 2^51, so
+        // the rounded significand stays below 2^53)
+        let r = m >> 1;
+        (r + (m & r & 1), ec + 1)
+    } else if m < 1 << 52 {
+        (m << 1, ec - 1)
+    } else {
+        (m, ec)
+    };
+    Some(f64::from_bits(
+        ((e as u64) << 52) | (m as u64 & ((1 << 52) - 1)),
+    ))
+}
+
 /// e^x in `f64`: x = n·ln2 + r with a two-part ln2 (|r| ≤ ln2/2), a Taylor series of
 /// e^r to r¹⁶ (truncation < 1e-17), scaled by 2ⁿ. Within a few `f64` ulps.
 #[allow(clippy::excessive_precision)] // fdlibm's constants, as published
@@ -239,6 +285,14 @@ impl Real for f32 {
     #[inline]
     fn from_f64(v: f64) -> Self {
         v as f32
+    }
+    #[inline]
+    fn add_to_f64(c: f64, o: Self) -> f64 {
+        // lazily: the double addition is what the bits avoid
+        match f32_on_grid_sum(c, o) {
+            Some(v) => v,
+            None => c + o as f64,
+        }
     }
     #[inline]
     fn from_f64_diff(a: f64, b: f64) -> Self {
@@ -376,17 +430,64 @@ mod tests {
     extern crate std;
     use super::*;
 
+    /// The next state of a xorshift generator (the tests' random bits).
+    fn xorshift(x: &mut u64) -> u64 {
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        *x
+    }
+
+    /// `f32::add_to_f64(c, o)` is `c + o as f64` bit for bit: dithers on pump centres, and
+    /// random doubles and floats of every exponent and sign.
+    #[test]
+    fn the_f32_sum_on_the_grid_is_the_rounded_double_sum() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || xorshift(&mut x);
+        let mut pairs = std::vec![
+            (21_883.952_6, 0.0f32),
+            (21_883.952_6, -0.0),
+            (21_883.952_6, f32::NAN),
+            (21_883.952_6, f32::INFINITY),
+            (21_883.952_6, 1e-40),
+            (1.0, -0.75),
+            (1.0, 0.999_999_9),
+            (f64::MAX, 1e38),
+            (f64::MIN_POSITIVE, 1e-30),
+            (-3.0, 1.0),
+        ];
+        for _ in 0..300_000 {
+            let r = next();
+            let centre = 16_000.0 + (r >> 40) as f64 / 1024.0;
+            let dither = ((next() >> 40) as f32 / (1u32 << 24) as f32 - 0.5) * 60.0;
+            pairs.push((centre, dither));
+            let c = f64::from_bits(next() >> 1);
+            let o = f32::from_bits(next() as u32);
+            pairs.push((c, o));
+            // an o near c's scale and grid: the carries and ties
+            let c = 1.0 + (next() >> 12) as f64 / (1u64 << 52) as f64;
+            let o = (((next() >> 40) as f32) / (1u32 << 24) as f32 - 0.5) * 0.5;
+            pairs.push((
+                c * 2f64.powi((r % 64) as i32 - 32),
+                o * 2f32.powi((r % 64) as i32 - 32),
+            ));
+        }
+        for (c, o) in pairs {
+            let got = <f32 as Real>::add_to_f64(c, o);
+            let want = c + o as f64;
+            assert!(
+                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                "{c:e} + {o:e}: {got:e} against {want:e}"
+            );
+        }
+    }
+
     /// `f32::from_f64_diff(a, b)` is `(a − b) as f32` bit for bit: pumps within ±100 Hz of
     /// a reference, random doubles of one binade (either sign), and the other cases.
     #[test]
     fn the_f32_difference_from_the_bits_is_the_rounded_double_difference() {
         let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = || xorshift(&mut x);
         let mut pairs = std::vec![
             (21_883.952_6, 21_883.952_6),
             (0.0, 0.0),

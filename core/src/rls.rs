@@ -504,6 +504,25 @@ impl<T: Real, const N: usize> Rls<T, N> {
     /// firmware's tick ≈ 1 400 instructions for its 10 rows at `opt-level = "z"`).
     #[inline(always)]
     pub fn update_scaled(&mut self, a: &[T; N], s: &[T; N], y: T) -> Innovation<T> {
+        let inn = self.update_scaled_unfloored(a, s, y);
+        if inn.is_applied() {
+            self.floor_all();
+        }
+        inn
+    }
+
+    /// [`Rls::update_scaled`] without the `D` floor, for a caller that applies
+    /// [`Rls::floor_all`] once after a sample's rows: the estimator (the floor's tests are
+    /// ≈ 200 instructions a tick on the chip for its 10 rows). Between two floors a `D_j`
+    /// below [`D_FLOOR`] stays ≥ +0 (each update multiplies it by `α_(j−1)/α_j` ∈ (0, 1]),
+    /// and the updates stay finite (every `α` ≥ 1).
+    #[inline(always)]
+    pub(crate) fn update_scaled_unfloored(
+        &mut self,
+        a: &[T; N],
+        s: &[T; N],
+        y: T,
+    ) -> Innovation<T> {
         let mut phi = *a;
         macro_rules! scale_col {
             ($j:expr $(; $($i:expr),*)?) => {
@@ -511,7 +530,25 @@ impl<T: Real, const N: usize> Rls<T, N> {
             };
         }
         unrolled_columns!(scale_col);
-        self.update(&phi, y)
+        self.update_unfloored(&phi, y)
+    }
+
+    /// Raises every `D_j` below [`D_FLOOR`] to it, counted in [`RlsStats::d_floor_hits`]
+    /// (after the rows of [`Rls::update_scaled_unfloored`]; [`Rls::update`] applies it itself).
+    #[inline(always)]
+    pub(crate) fn floor_all(&mut self) {
+        let floor = T::from_f64(D_FLOOR);
+        // `d` is finite and ≥ +0 here, so a comparison of the bit patterns catches zero
+        // and underflow (in index order, written out; the clamp itself is out of line: it
+        // never runs in practice)
+        macro_rules! floor_col {
+            ($j:expr $(; $($i:expr),*)?) => {
+                if self.d[$j].lt_nonneg(floor) {
+                    self.floor_d($j, floor);
+                }
+            };
+        }
+        unrolled_columns!(floor_col);
     }
 
     /// One scalar measurement `y = φᵀx + e`, `e ~ N(0, 1)`: Bierman's UD update.
@@ -521,9 +558,18 @@ impl<T: Real, const N: usize> Rls<T, N> {
     /// `s` or result; `s ≤ 0`) leave the state untouched, are counted in
     /// [`RlsStats::skipped_non_finite`] and return `e = 0, s = 1` with the reason in
     /// [`Innovation::status`]. New `D_j` below [`D_FLOOR`] are clamped and counted.
+    pub fn update(&mut self, phi: &[T; N], y: T) -> Innovation<T> {
+        let inn = self.update_unfloored(phi, y);
+        if inn.is_applied() {
+            self.floor_all();
+        }
+        inn
+    }
+
+    /// [`Rls::update`] without the `D` floor ([`Rls::update_scaled_unfloored`]).
     #[allow(clippy::needless_range_loop)] // triangular index arithmetic; all < N
     #[inline(never)]
-    pub fn update(&mut self, phi: &[T; N], y: T) -> Innovation<T> {
+    fn update_unfloored(&mut self, phi: &[T; N], y: T) -> Innovation<T> {
         // No finiteness test of the input up front (≈ 56 instructions a row on the M4F):
         // with `x` finite (checked after every update), a non-finite `y` or `φ_j` makes
         // `e` non-finite (±∞·x_j is ±∞ or NaN, NaN propagates, ∞ − ∞ is NaN), and nothing
@@ -629,18 +675,6 @@ impl<T: Real, const N: usize> Rls<T, N> {
             return self.reject(UpdateStatus::NumericalFault);
         }
         self.x = k;
-        let floor = T::from_f64(D_FLOOR);
-        // `d` is finite and ≥ +0 here, so a comparison of the bit patterns catches zero
-        // and underflow (in index order, written out; the clamp itself is out of line: it
-        // never runs in practice)
-        macro_rules! floor_col {
-            ($j:expr $(; $($i:expr),*)?) => {
-                if self.d[$j].lt_nonneg(floor) {
-                    self.floor_d($j, floor);
-                }
-            };
-        }
-        unrolled_columns!(floor_col);
         self.stats.updates = self.stats.updates.saturating_add(1);
         Innovation {
             e,

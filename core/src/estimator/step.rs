@@ -280,10 +280,19 @@ impl<T: Real> State<T> {
         for r in 0..NROWS {
             // φ = row ∘ (column scale · row weight), the products formed at design time
             let (a, y) = (&rows.drive_phi[r], rows.drive_y[r] * f.w1[r]);
-            sum1 += self.rls1.update_scaled(a, &f.scw1[r], y).normalized_sq();
+            sum1 += self
+                .rls1
+                .update_scaled_unfloored(a, &f.scw1[r], y)
+                .normalized_sq();
             let (a, y) = (&rows.sense_phi[r], rows.sense_y[r] * f.w2[r]);
-            sum2 += self.rls2.update_scaled(a, &f.scw2[r], y).normalized_sq();
+            sum2 += self
+                .rls2
+                .update_scaled_unfloored(a, &f.scw2[r], y)
+                .normalized_sq();
         }
+        // the `D` floor once per sample, not per row (`Rls::update_scaled_unfloored`)
+        self.rls1.floor_all();
+        self.rls2.floor_all();
         if f.drift.enabled() {
             let [b1, b2] = before;
             let corr = [
@@ -545,8 +554,8 @@ impl<T: Real> State<T> {
     }
 
     /// The pump command for sample `self.k`, Hz: the scheduler's centre, converted to Hz
-    /// only when it moved, plus its dither in `T` (on the chip one soft-float addition
-    /// and one widening per sample, not an ω sum, a product and a sum in `f64`).
+    /// only when it moved, plus its dither in `T` (on the chip added from the bits,
+    /// [`Real::add_to_f64`]: not an ω sum, a product and a sum in `f64`).
     #[inline(always)]
     fn pump_command_hz(&mut self, d: &Design<T>) -> f64 {
         let dither = self.sched.command_dither(self.k);
@@ -554,7 +563,7 @@ impl<T: Real> State<T> {
         if centre.to_bits() != self.centre_hz.0 {
             self.centre_hz = (centre.to_bits(), d.units.pump_hz_of(centre));
         }
-        self.centre_hz.1 + (d.units.two_f0_t * dither).to_f64()
+        T::add_to_f64(self.centre_hz.1, d.units.two_f0_t * dither)
     }
 
     /// Stage 7: the pump command for the next sample instant.

@@ -656,6 +656,50 @@ fn d_floor_clamps_underflow_and_counts() {
     assert!(inn.is_applied() && rls.min_d() > 0.0);
 }
 
+/// The estimator's rows without the floor, then the floor once: the same state as the
+/// floored updates where the floor is not reached; where a row drives a `D` below it, the
+/// sample's later rows stay finite and the floor restores it.
+#[test]
+fn the_floor_once_per_sample_is_the_floor_per_update() {
+    let rows: [([f32; 4], [f32; 4], f32); 5] = [
+        ([1.0, 0.3, -0.2, 0.5], [1.0, 2.0, 0.5, 1.0], 0.7),
+        ([0.1, -1.0, 0.4, 0.2], [1.0, 2.0, 0.5, 1.0], -0.2),
+        ([0.6, 0.2, 1.0, -0.3], [1.0, 2.0, 0.5, 1.0], 1.1),
+        ([-0.4, 0.5, 0.1, 1.0], [1.0, 2.0, 0.5, 1.0], 0.3),
+        ([0.2, 0.2, -0.6, 0.4], [1.0, 2.0, 0.5, 1.0], -0.9),
+    ];
+    let mut a: Rls<f32, 4> = Rls::new(RlsSettings::default());
+    let mut b = a.clone();
+    for _ in 0..50 {
+        a.begin_sample();
+        b.begin_sample();
+        for (phi, sc, y) in &rows {
+            let ia = a.update_scaled(phi, sc, *y);
+            let ib = b.update_scaled_unfloored(phi, sc, *y);
+            assert_eq!(ia, ib);
+        }
+        b.floor_all();
+        assert_eq!(a.factors(), b.factors());
+        assert_eq!(a.estimate(), b.estimate());
+    }
+    // a row that underflows D0 (as `d_floor_clamps_underflow_and_counts`), then more rows
+    let mut c: Rls<f32, 3> = Rls::new(RlsSettings::default());
+    let ones = [1.0; 3];
+    assert!(
+        c.update_scaled_unfloored(&[1e16, 0.0, 0.0], &ones, 1.0)
+            .is_applied()
+    );
+    assert!(c.factors().1[0] < D_FLOOR as f32);
+    assert!(
+        c.update_scaled_unfloored(&[0.5, 1.0, 0.0], &ones, 1.0)
+            .is_applied()
+    );
+    assert!(c.estimate().iter().all(|v| v.is_finite()));
+    c.floor_all();
+    assert_eq!(c.min_d(), D_FLOOR as f32);
+    assert_eq!(c.stats().d_floor_hits, 1);
+}
+
 #[test]
 fn set_trace_max_takes_effect_and_rejects_invalid() {
     let mut rls: Rls<f64, 2> = Rls::new(unbounded(0.5, 1.0));
