@@ -602,21 +602,20 @@ impl<T: Real> RateState<T> {
     pub fn hold_zero(&mut self, d: &RateDesign<T>, dev14: T, dev24: T, settled: bool) {
         let n = &mut self.nom;
         let mu_dev = -T::from_f64(0.5) * (dev14 + dev24);
-        if !settled && n.zero_n > T::ZERO {
-            n.zero_wait = d.zero_quiet;
-        }
-        if settled && n.zero_wait == 0 {
+        // `zero_wait` > 0 only once the mean has started (`restart_zero` clears both)
+        if !settled {
+            if n.zero_n > T::ZERO {
+                n.zero_wait = d.zero_quiet;
+            } else {
+                n.zero_dev = mu_dev;
+            }
+        } else if n.zero_wait > 0 {
+            n.zero_wait -= 1;
+        } else {
             n.zero_n += T::ONE;
             let a = T::ONE / n.zero_n;
             let a = if a > d.zero_alpha { a } else { d.zero_alpha };
             n.zero_dev += a * (mu_dev - n.zero_dev);
-        } else {
-            if settled {
-                n.zero_wait = n.zero_wait.saturating_sub(1);
-            }
-            if n.zero_n == T::ZERO {
-                n.zero_dev = mu_dev;
-            }
         }
         n.mu_xy = n.mu_nom + n.zero_dev;
     }

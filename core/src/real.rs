@@ -170,7 +170,8 @@ fn same_binade_diff_f32(a: f64, b: f64) -> Option<f32> {
 }
 
 /// `c + o as f64` for a positive normal `c` and a normal `o` whose last bit lies on `c`'s
-/// grid and below a quarter of `c` (or `o` = ±0), `None` otherwise. The exact sum is then an
+/// grid and whose size is below 2^51 of `c`'s units (half the bottom of `c`'s binade), or
+/// `o` = ±0; `None` otherwise. The exact sum is then an
 /// integer number of `c`'s units between 2^51 and 2^53 + 2^51: exact below 2^53, above it
 /// one bit dropped, to nearest, ties to even, as the addition rounds it.
 #[inline]
