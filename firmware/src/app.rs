@@ -88,7 +88,7 @@
 use embedded_hal::spi::SpiDevice;
 use paragyro_core::{Config, ConfigError, Cplx, Estimator, Lockin, Sample, StepOutput};
 
-use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, Channel, FTW_SCALE, PumpPlan};
+use crate::drivers::ad9959::{self, Ad9959, AmplitudeWord, FTW_SCALE, PumpPlan};
 use crate::drivers::ads131m08::{self, Ads131m08, LOCKIN_CHANNELS, LockinCalibration};
 use crate::drivers::adxl355::Adxl355;
 
@@ -423,21 +423,6 @@ fn read_accel<S: SpiDevice>(
             ([f32::NAN; 2], 0, fault::ACCEL)
         }
     }
-}
-
-/// Write what changed (everything when `rewrite`), stopping at the first error.
-fn write_pump<S: SpiDevice>(
-    dds: &mut Ad9959<S>,
-    plan: Option<&PumpPlan>,
-    asf: Option<AmplitudeWord>,
-) -> Result<(), ad9959::Error<S::Error>> {
-    if let Some(plan) = plan {
-        dds.apply_plan(plan)?;
-    }
-    if let Some(asf) = asf {
-        dds.set_amplitude(Channel::PUMP, asf)?;
-    }
-    Ok(())
 }
 
 impl<AX, AY, XL, DDS> App<AX, AY, XL, DDS>
@@ -889,7 +874,7 @@ where
     }
 
     /// Writes into the DDS's buffers the words that differ from its active ones (all of
-    /// them after an error or a mapping change), stopping at the first error. Not inlined:
+    /// them after an error or a mapping change), in one SPI frame. Not inlined:
     /// one copy for both steps (the stm32f405 image's flash budget).
     #[inline(never)]
     fn load(
@@ -900,11 +885,10 @@ where
         let all = self.dirty;
         let freq = all || self.active.is_none_or(|a| a.0 != plan.reference_ftw());
         let amp = all || self.active.is_none_or(|a| a.1 != asf);
-        write_pump(
-            &mut self.chips.dds,
-            freq.then_some(&plan),
-            amp.then_some(asf),
-        )
+        // one frame: the three tuning words if they changed, the amplitude if it did
+        self.chips
+            .dds
+            .write_pump(freq.then_some(&plan), amp.then_some(asf))
     }
 
     /// Realised pump frequency in effect (the next sample's known pump), Hz; NaN before

@@ -725,8 +725,9 @@ impl SpiDevice for FilDds<'_> {
         let r = if self.bus.dds_fail.get() {
             Err(ReplayError)
         } else {
-            // one register write = one transaction: the instruction byte and the data
-            let mut buf = [0u8; 16];
+            // one transaction = one frame of register cycles (at most 27 bytes:
+            // `Ad9959::write_pump`)
+            let mut buf = [0u8; 32];
             let mut n = 0usize;
             for op in ops.iter_mut() {
                 match op {

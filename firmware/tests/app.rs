@@ -2,6 +2,7 @@
 //! the firmware path against the bare estimator bit for bit, every fault path, the pump
 //! guard, and the replay devices themselves through the real drivers.
 
+use embedded_hal::spi::{Operation, SpiDevice as _};
 use embedded_hal_mock::eh1::delay::NoopDelay;
 use paragyro_core::estimator::event;
 use paragyro_core::{Config, Counters, Cplx, Estimator, Lockin, Sample, StepOutput};
@@ -721,10 +722,9 @@ fn dds_write_error_keeps_the_pump_in_effect_and_rewrites_everything() {
     let mut fail_from = None;
     for k in 0..n {
         if k == F {
-            // this tick: CSR(pump) ok, CFTW0(pump) ok, CSR(reference) fails: the pump's
-            // buffer holds a new word next to the old reference word
+            // this tick's frame (its words and amplitude) fails
             let t = cap.transactions();
-            cap.fail_transactions(Span::at(t + 2));
+            cap.fail_transactions(Span::at(t));
             fail_from = Some(t);
         }
         if k == F + 10 {
@@ -757,14 +757,22 @@ fn dds_write_error_keeps_the_pump_in_effect_and_rewrites_everything() {
             assert_eq!(r.faults, 0, "tick {k}");
         }
         if k == F {
-            assert_eq!(cap.transactions(), fail_from.unwrap() + 3);
+            assert_eq!(cap.transactions(), fail_from.unwrap() + 1);
+            // a frame cut short on a real bus leaves part of it in the buffers: the pump's
+            // word alone, next to the old reference word
+            let mut spi = cap.spi();
+            let ftw = cap.buffered().ftw_of(Channel::PUMP) + 2;
+            let [a, b, c, d] = ftw.to_be_bytes();
+            spi.write(&[0x00, Channel::PUMP.csr_enable() | 0x02, 0x04, a, b, c, d])
+                .unwrap();
             let b = cap.buffered();
             assert!(!b.phase_locked(), "the partial write is in the buffers");
             assert_ne!(cap.buffered_pump_hz(), cap.active_pump_hz());
         }
         if k == F + 1 || k == F + 20 {
-            // recovery: every word rewritten (3 channels' CSR + CFTW0, CSR + ACR), one pulse
-            assert_eq!(cap.transactions() - t0, 8, "tick {k}");
+            // recovery: every word rewritten in one frame (3 channels' CSR + CFTW0,
+            // CSR + ACR), one pulse
+            assert_eq!(cap.transactions() - t0, 1, "tick {k}");
             assert_eq!(cap.pulses(), pulses + 1);
             assert_eq!(cap.buffered(), cap.active());
         }
@@ -925,7 +933,8 @@ fn failed_start_is_reported_and_retried() {
     let cap = DdsCapture::new(SYSCLK);
     let mut io = cap.io_update();
     let mut app = clean(&d, &cap);
-    cap.fail_transactions(Span::at(3));
+    // start's one frame: the three words and the amplitude
+    cap.fail_transactions(Span::at(cap.transactions()));
     assert_eq!(app.start(&mut io), Err(ad9959::Error::Spi(ReplayError)));
     assert_eq!(app.counters().dds_errors, 1);
     assert!(app.pump_hz().is_nan());
@@ -1358,4 +1367,34 @@ fn two_steps_per_sample_are_told_to_the_core_as_the_sweep_they_are_the_half_mean
         "the steps' errors added up to {worst_sum} words"
     );
     assert_eq!(app.counters().dds_errors, 0);
+}
+
+#[test]
+fn the_dds_model_takes_a_frame_of_cycles_in_order_and_drops_an_incomplete_one() {
+    let cap = DdsCapture::new(SYSCLK);
+    let mut spi = cap.spi();
+    let sel = |ch: Channel| ch.csr_enable() | 0x02;
+    // one frame: CSR(ch1), CFTW0, then CSR(ch2), ACR, then a read of CSR, then a CFTW0
+    // cut short (three of its four bytes)
+    let mut read = [0u8; 1];
+    spi.transaction(&mut [
+        Operation::Write(&[0x00, sel(Channel::Ch1), 0x04, 0x12, 0x34, 0x56, 0x78]),
+        Operation::Write(&[0x00, sel(Channel::Ch2), 0x06, 0x00, 0x13, 0x99]),
+        Operation::Write(&[0x80]),
+        Operation::Read(&mut read),
+        Operation::Write(&[0x04, 0xAA, 0xBB, 0xCC]),
+    ])
+    .unwrap();
+    assert_eq!(cap.transactions(), 1);
+    let b = cap.buffered();
+    assert_eq!(b.ftw_of(Channel::Ch1), 0x1234_5678);
+    assert_eq!(b.ftw_of(Channel::Ch2), 0, "the cut-short word is dropped");
+    assert_eq!(b.asf_of(Channel::Ch2), AmplitudeWord::new(0x399));
+    assert_eq!(read, [sel(Channel::Ch2)]);
+    assert_eq!(cap.csr(), sel(Channel::Ch2));
+    // buffered only: nothing active before IO_UPDATE
+    assert_eq!(cap.active(), Default::default());
+    // the next frame starts with an instruction again (CS high reset the port)
+    spi.write(&[0x04, 0xAA, 0xBB, 0xCC, 0xDD]).unwrap();
+    assert_eq!(cap.buffered().ftw_of(Channel::Ch2), 0xAABB_CCDD);
 }

@@ -821,6 +821,25 @@ fn dds_select(ch: Channel) -> Vec<T<u8>> {
     dds_write(0x00, vec![ch.csr_enable() | 0x02])
 }
 
+/// One frame: CSR selecting `ch`, then the register's cycle.
+fn dds_channel_write(ch: Channel, instr: u8, data: Vec<u8>) -> Vec<T<u8>> {
+    txn(vec![
+        T::write_vec(vec![0x00, ch.csr_enable() | 0x02, instr]),
+        T::write_vec(data),
+    ])
+}
+
+/// The cycles of a plan's three tuning words (pump, reference, 3Ω), each after its select.
+fn plan_cycles(ftws: [u32; 3]) -> Vec<u8> {
+    let chans = [Channel::PUMP, Channel::REFERENCE, Channel::THIRD];
+    let mut v = Vec::new();
+    for (ch, w) in chans.into_iter().zip(ftws) {
+        v.extend([0x00, ch.csr_enable() | 0x02, 0x04]);
+        v.extend(w.to_be_bytes());
+    }
+    v
+}
+
 #[test]
 fn dds_ftw_for_21_9_khz_at_500_mhz() {
     let ftw = ad9959::ftw_from_hz(21_900.0, SYSCLK).unwrap();
@@ -944,10 +963,12 @@ fn dds_init_selects_all_channels_3_wire() {
 
 #[test]
 fn dds_set_frequency_transactions() {
-    let mut exp = dds_select(Channel::Ch3);
-    exp.extend(dds_write(0x04, vec![0x00, 0x02, 0xDE, 0xD8]));
-    exp.extend(dds_select(Channel::Ch1));
-    exp.extend(dds_write(0x04, vec![0x00, 0x02, 0xDE, 0xD8]));
+    let mut exp = dds_channel_write(Channel::Ch3, 0x04, vec![0x00, 0x02, 0xDE, 0xD8]);
+    exp.extend(dds_channel_write(
+        Channel::Ch1,
+        0x04,
+        vec![0x00, 0x02, 0xDE, 0xD8],
+    ));
     let mut dds = Ad9959::new(Mock::new(&exp), SYSCLK);
     dds.set_frequency_word(Channel::SPARE, 188_120).unwrap();
     let f = dds.set_frequency(Channel::Ch1, 21_900.0).unwrap();
@@ -964,12 +985,12 @@ fn dds_set_frequency_transactions() {
 
 #[test]
 fn dds_set_pump_frequency_writes_three_coherent_words() {
-    let mut exp = dds_select(Channel::PUMP);
-    exp.extend(dds_write(0x04, 188_120u32.to_be_bytes().to_vec()));
-    exp.extend(dds_select(Channel::REFERENCE));
-    exp.extend(dds_write(0x04, vec![0x00, 0x01, 0x6F, 0x6C])); // 94060
-    exp.extend(dds_select(Channel::THIRD));
-    exp.extend(dds_write(0x04, vec![0x00, 0x04, 0x4E, 0x44])); // 282180
+    // one frame: 188 120, 94 060 (0x00016F6C), 282 180 (0x00044E44)
+    let exp = txn(vec![T::write_vec(plan_cycles([188_120, 94_060, 282_180]))]);
+    assert_eq!(
+        plan_cycles([188_120, 94_060, 282_180])[10..14],
+        [0x00, 0x01, 0x6F, 0x6C]
+    );
     let mut dds = Ad9959::new(Mock::new(&exp), SYSCLK);
     let plan = dds.set_pump_frequency(21_900.0).unwrap();
     assert_eq!(plan.pump_ftw(), 188_120);
@@ -981,13 +1002,48 @@ fn dds_set_pump_frequency_writes_three_coherent_words() {
 }
 
 #[test]
+fn dds_write_pump_is_one_frame_of_what_is_given() {
+    let plan = PumpPlan::new(21_900.0, SYSCLK).unwrap();
+    // CSR(pump) then ACR: s = 0.81
+    let acr = vec![
+        0x00,
+        Channel::PUMP.csr_enable() | 0x02,
+        0x06,
+        0x00,
+        0x13,
+        0x99,
+    ];
+    // the words and the amplitude in one frame, then the amplitude alone
+    let mut exp = txn(vec![
+        T::write_vec(plan_cycles([188_120, 94_060, 282_180])),
+        T::write_vec(acr.clone()),
+    ]);
+    exp.extend(txn(vec![T::write_vec(acr)]));
+    let mut dds = Ad9959::new(Mock::new(&exp), SYSCLK);
+    let asf = AmplitudeWord::from_scale(0.81);
+    dds.write_pump(Some(&plan), Some(asf)).unwrap();
+    assert_eq!(dds.take_io_update().map(|u| u.channels), Some(0b0111));
+    dds.write_pump(None, Some(asf)).unwrap();
+    assert_eq!(dds.take_io_update().map(|u| u.channels), Some(0b0001));
+    // nothing given: no frame, nothing to update
+    dds.write_pump(None, None).unwrap();
+    assert_eq!(dds.take_io_update(), None);
+    dds.destroy().done();
+}
+
+#[test]
 fn dds_phase_and_amplitude_transactions() {
-    let mut exp = dds_select(Channel::Ch1);
-    exp.extend(dds_write(0x05, vec![0x10, 0x00])); // 4096 = quarter turn
-    exp.extend(dds_select(Channel::Ch0));
-    exp.extend(dds_write(0x06, vec![0x00, 0x13, 0x99])); // s = 0.81
-    exp.extend(dds_select(Channel::Ch2));
-    exp.extend(dds_write(0x06, vec![0x00, 0x10, 0x00]));
+    let mut exp = dds_channel_write(Channel::Ch1, 0x05, vec![0x10, 0x00]); // quarter turn
+    exp.extend(dds_channel_write(
+        Channel::Ch0,
+        0x06,
+        vec![0x00, 0x13, 0x99],
+    )); // s = 0.81
+    exp.extend(dds_channel_write(
+        Channel::Ch2,
+        0x06,
+        vec![0x00, 0x10, 0x00],
+    ));
     let mut dds = Ad9959::new(Mock::new(&exp), SYSCLK);
     dds.set_phase(Channel::Ch1, PhaseWord::from_turns(0.25))
         .unwrap();
@@ -1104,11 +1160,10 @@ fn dds_every_operation_reports_spi_errors() {
         Err(Spi(FailingSpiError))
     );
     assert_eq!(dds.take_io_update(), None, "nothing was written");
-    // Failing part-way through the six-transaction pump update.
-    for ok in 0..6 {
-        let mut dds = Ad9959::new(FailingSpi::failing_after(ok, 0), SYSCLK);
-        assert_eq!(dds.set_pump_frequency(21_900.0), Err(Spi(FailingSpiError)));
-    }
+    // The pump update is one frame: one failed transaction fails it, nothing pending.
+    let mut dds = Ad9959::new(FailingSpi::failing_after(0, 0), SYSCLK);
+    assert_eq!(dds.set_pump_frequency(21_900.0), Err(Spi(FailingSpiError)));
+    assert_eq!(dds.take_io_update(), None);
     // An absent DDS reads back all-ones or zeros.
     let mut dds = Ad9959::new(FailingSpi::responding(0xFF), SYSCLK);
     assert_eq!(dds.read_frequency_word(Channel::Ch0), Ok(0xFFFF_FFFF));

@@ -313,8 +313,7 @@ fn the_dds_words_are_what_the_firmware_path_adds_to_the_rate() {
 /// twice the sense resonance through the ramp and at the end (the tracking's dead band is
 /// 0.25 Hz). Measured (`cargo run --release -p paragyro-fil -- warm-up`, seed 1,
 /// `summary.json` `warm_up`): 0 resets, health on 100 % of the ramp, the pump within
-/// 0.23 Hz. Its largest tick is within the budget's 15 000 instructions (measured 14 669,
-/// `instr_max`); its mean is not (the next test).
+/// 0.23 Hz. Its ticks are within the budget (the next test).
 #[test]
 fn a_warm_up_is_followed_without_resets_in_the_loop() {
     if skip() {
@@ -336,14 +335,12 @@ fn a_warm_up_is_followed_without_resets_in_the_loop() {
 }
 
 /// The warm-up within the tick budget (mean 12 000, max 15 000 instructions, exact).
-///
-/// Ignored: the mean is not met. Measured (`cargo run --release -p paragyro-fil -- warm-up`,
-/// `summary.json` `instr_mean`, `instr_max`): mean 12 122, max 14 669. Its dither runs
-/// throughout, and every tick updates both RLS and writes both pump steps to the DDS
-/// (`firmware/scripts/fil-profile.sh warm-up`); `fw-drift-retune`, whose mean the README's
-/// budget row quotes, stops its dither for its last 4 of 10 s.
+/// Measured (`cargo run --release -p paragyro-fil -- warm-up`, `summary.json`
+/// `instr_mean`, `instr_max`): mean 11 741, max 14 220. Its dither runs throughout, and
+/// every tick updates both RLS and writes both pump steps to the DDS, one SPI frame each
+/// (`firmware/scripts/fil-profile.sh warm-up`); `fw-drift-retune`, whose mean the
+/// README's budget row quotes, stops its dither for its last 4 of 10 s.
 #[test]
-#[ignore = "not met: mean 12 122 > 12 000 instructions in the warm-up (max 14 669 is within 15 000)"]
 fn a_warm_up_stays_within_the_tick_budget_in_the_loop() {
     if skip() {
         return;

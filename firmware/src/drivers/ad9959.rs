@@ -6,12 +6,17 @@
 //! 125 MHz, [`DEFAULT_SYSCLK_HZ`]): channel 0 the pump at 2Ω (≈ 21.9 kHz), channel 1 the reference at Ω,
 //! channel 2 the reference at 3Ω, channel 3 spare ([`Channel::PUMP`] …).
 //!
-//! **Serial port.** Every register access is one [`SpiDevice`] transaction: an
-//! instruction byte (`R/W[7]`, address `[4:0]`) followed by the register bytes, MSB first.
+//! **Serial port.** A register access is a communication cycle: an instruction byte
+//! (`R/W[7]`, address `[4:0]`) followed by the register's bytes, MSB first. Once a cycle
+//! is complete the serial port takes the next byte as the next cycle's instruction, so
+//! one chip-select frame (one [`SpiDevice`] transaction) can carry several cycles; raising
+//! CS ends the frame and drops an incomplete cycle.
 //! The channel registers (CFR, CFTW0, CPOW0, ACR, …) exist once per channel at the same
 //! address; the channel-enable bits of CSR select which channels a write reaches, and they
 //! act immediately (no I/O update). The driver writes CSR before every channel register,
-//! in 3-wire mode (SDIO_0 = MOSI, SDIO_2 = MISO) and MSB-first: `CSR = enables | 0x02`.
+//! in 3-wire mode (SDIO_0 = MOSI, SDIO_2 = MISO) and MSB-first: `CSR = enables | 0x02`,
+//! in the same frame: a channel write is one transaction, and a pump plan's three words
+//! with the pump's amplitude ([`Ad9959::write_pump`]) one transaction of up to 27 bytes.
 //!
 //! **I/O update.** Written words land in buffers and reach the DDS cores only on a rising
 //! edge of the `IO_UPDATE` pin, which is a separate GPIO the caller owns. The driver
@@ -420,6 +425,46 @@ fn isqrt_below_2_22(n: u32) -> u32 {
     r
 }
 
+/// The CSR byte that selects `ch` alone (3-wire, MSB first).
+const fn csr_selecting(ch: Channel) -> u8 {
+    (ch.csr_enable() & 0xF0) | CSR_3_WIRE
+}
+
+/// A plan's three tuning-word cycles (pump, reference, 3Ω), each after its CSR select:
+/// 21 bytes of one frame.
+fn plan_cycles(plan: &PumpPlan) -> [u8; 21] {
+    let (csr, ftw) = (
+        Register::Csr.write_instruction(),
+        Register::Cftw0.write_instruction(),
+    );
+    let [p0, p1, p2, p3] = plan.pump_ftw().to_be_bytes();
+    let [r0, r1, r2, r3] = plan.reference_ftw().to_be_bytes();
+    let [t0, t1, t2, t3] = plan.third_ftw().to_be_bytes();
+    [
+        csr,
+        csr_selecting(Channel::PUMP),
+        ftw,
+        p0,
+        p1,
+        p2,
+        p3,
+        csr,
+        csr_selecting(Channel::REFERENCE),
+        ftw,
+        r0,
+        r1,
+        r2,
+        r3,
+        csr,
+        csr_selecting(Channel::THIRD),
+        ftw,
+        t0,
+        t1,
+        t2,
+        t3,
+    ]
+}
+
 /// What the caller must do after buffered writes: pulse the `IO_UPDATE` GPIO once.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -475,14 +520,21 @@ impl<SPI: SpiDevice> Ad9959<SPI> {
         self.write(Register::Csr, &[(enables & 0xF0) | CSR_3_WIRE])
     }
 
+    /// One frame: CSR selecting `ch`, then `reg`'s cycle.
     fn write_channel(
         &mut self,
         ch: Channel,
         reg: Register,
         data: &[u8],
     ) -> Result<(), Error<SPI::Error>> {
-        self.select(ch.csr_enable())?;
-        self.write(reg, data)?;
+        let head = [
+            Register::Csr.write_instruction(),
+            csr_selecting(ch),
+            reg.write_instruction(),
+        ];
+        self.spi
+            .transaction(&mut [Operation::Write(&head), Operation::Write(data)])
+            .map_err(Error::Spi)?;
         self.pending_channels |= ch.mask();
         Ok(())
     }
@@ -528,13 +580,51 @@ impl<SPI: SpiDevice> Ad9959<SPI> {
         Ok(hz_from_ftw(ftw, self.sysclk_hz))
     }
 
-    /// Write the pump, reference and 3Ω tuning words of a plan (channels 0, 1, 2). Pulse
-    /// IO_UPDATE once afterwards so that the three change on the same SYSCLK edge
-    /// (phase-continuous, ratios kept).
+    /// Write the pump, reference and 3Ω tuning words of a plan (channels 0, 1, 2), in one
+    /// frame. Pulse IO_UPDATE once afterwards so that the three change on the same SYSCLK
+    /// edge (phase-continuous, ratios kept).
     pub fn apply_plan(&mut self, plan: &PumpPlan) -> Result<(), Error<SPI::Error>> {
-        self.set_frequency_word(Channel::PUMP, plan.pump_ftw())?;
-        self.set_frequency_word(Channel::REFERENCE, plan.reference_ftw())?;
-        self.set_frequency_word(Channel::THIRD, plan.third_ftw())
+        self.write_pump(Some(plan), None)
+    }
+
+    /// Write what is given in one frame (one transaction; nothing when both are `None`):
+    /// the plan's three tuning words ([`Ad9959::apply_plan`]), then the pump's amplitude
+    /// (ACR), each cycle after its CSR select. The tick's one DDS write; pulse IO_UPDATE
+    /// once afterwards.
+    pub fn write_pump(
+        &mut self,
+        plan: Option<&PumpPlan>,
+        asf: Option<AmplitudeWord>,
+    ) -> Result<(), Error<SPI::Error>> {
+        let words = plan.map(plan_cycles);
+        let amplitude = asf.map(|a| {
+            let [a0, a1, a2] = a.acr_bytes();
+            [
+                Register::Csr.write_instruction(),
+                csr_selecting(Channel::PUMP),
+                Register::Acr.write_instruction(),
+                a0,
+                a1,
+                a2,
+            ]
+        });
+        let r = match (&words, &amplitude) {
+            (Some(w), Some(a)) => self
+                .spi
+                .transaction(&mut [Operation::Write(w), Operation::Write(a)]),
+            (Some(w), None) => self.spi.transaction(&mut [Operation::Write(w)]),
+            (None, Some(a)) => self.spi.transaction(&mut [Operation::Write(a)]),
+            (None, None) => return Ok(()),
+        };
+        r.map_err(Error::Spi)?;
+        if words.is_some() {
+            self.pending_channels |=
+                Channel::PUMP.mask() | Channel::REFERENCE.mask() | Channel::THIRD.mask();
+        }
+        if amplitude.is_some() {
+            self.pending_channels |= Channel::PUMP.mask();
+        }
+        Ok(())
     }
 
     /// Plan and write the pump and references for `pump_hz` at the current SYSCLK;

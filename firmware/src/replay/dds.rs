@@ -250,8 +250,10 @@ impl DdsCapture {
     }
 }
 
-/// The [`SpiDevice`] side of a [`DdsCapture`]: an AD9959 serial port (instruction byte,
-/// then the register bytes, one register per transaction).
+/// The [`SpiDevice`] side of a [`DdsCapture`]: an AD9959 serial port. A transaction is
+/// one chip-select frame of communication cycles, each an instruction byte then as many
+/// bytes as its register has ([`register_len`]); a write takes effect when its cycle is
+/// complete, an incomplete last cycle is dropped (CS high resets the port).
 #[derive(Clone, Copy, Debug)]
 pub struct CaptureDds<'a> {
     cap: &'a DdsCapture,
@@ -268,38 +270,55 @@ impl ErrorType for CaptureDds<'_> {
     type Error = ReplayError;
 }
 
-/// Per-transaction byte-stream state of the AD9959's serial port.
+/// Bytes of the AD9959 register at `addr` (datasheet register map: CSR 1, FR1 3, FR2 2,
+/// CFR 3, CFTW0 4, CPOW0 2, ACR 3, LSRR 2, RDW/FDW and the profile words 4).
+pub const fn register_len(addr: u8) -> usize {
+    match addr & 0x1F {
+        0x00 => 1,
+        0x02 | 0x05 | 0x07 => 2,
+        0x01 | 0x03 | 0x06 => 3,
+        _ => 4,
+    }
+}
+
+/// Per-transaction byte-stream state of the AD9959's serial port: the cycle in progress.
 struct DdsStream {
     instruction: Option<u8>,
     data: [u8; 4],
     len: usize,
     read: [u8; 4],
-    read_pos: usize,
 }
 
 impl DdsStream {
     fn byte(&mut self, cap: &DdsCapture, mosi: u8) -> u8 {
-        match self.instruction {
-            None => {
-                self.instruction = Some(mosi);
-                if mosi & 0x80 != 0 {
-                    self.read = cap.read(mosi & 0x1F);
-                }
-                0
+        let Some(i) = self.instruction else {
+            self.instruction = Some(mosi);
+            self.len = 0;
+            if mosi & 0x80 != 0 {
+                self.read = cap.read(mosi & 0x1F);
             }
-            Some(i) if i & 0x80 != 0 => {
-                let v = self.read.get(self.read_pos).copied().unwrap_or(0);
-                self.read_pos = self.read_pos.saturating_add(1);
-                v
+            return 0;
+        };
+        let out = if i & 0x80 != 0 {
+            self.read.get(self.len).copied().unwrap_or(0)
+        } else {
+            if let Some(slot) = self.data.get_mut(self.len) {
+                *slot = mosi;
             }
-            Some(_) => {
-                if let Some(slot) = self.data.get_mut(self.len) {
-                    *slot = mosi;
-                }
-                self.len = self.len.saturating_add(1);
-                0
+            0
+        };
+        self.len = self.len.saturating_add(1);
+        let n = register_len(i);
+        if self.len >= n {
+            // the cycle is complete: a write takes effect, the next byte is an instruction
+            if i & 0x80 == 0
+                && let Some(data) = self.data.get(..n)
+            {
+                cap.write(i & 0x1F, data);
             }
+            self.instruction = None;
         }
+        out
     }
 }
 
@@ -319,7 +338,6 @@ impl SpiDevice<u8> for CaptureDds<'_> {
             data: [0; 4],
             len: 0,
             read: [0; 4],
-            read_pos: 0,
         };
         for op in operations.iter_mut() {
             match op {
@@ -350,12 +368,7 @@ impl SpiDevice<u8> for CaptureDds<'_> {
                 Operation::DelayNs(_) => {}
             }
         }
-        if let Some(i) = s.instruction
-            && i & 0x80 == 0
-            && let Some(data) = s.data.get(..s.len)
-        {
-            cap.write(i & 0x1F, data);
-        }
+        // an incomplete last cycle is dropped
         Ok(())
     }
 }

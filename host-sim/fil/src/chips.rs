@@ -161,7 +161,7 @@ impl SensorChips {
 /// the bytes the firmware wrote.
 pub struct Dds {
     cap: DdsCapture,
-    /// Writes applied so far.
+    /// SPI frames applied so far.
     pub writes: u64,
 }
 

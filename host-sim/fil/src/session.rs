@@ -132,7 +132,8 @@ pub struct Session {
     pub pulses: u64,
     /// Of those, pulses half a period after DRDY (the second of two steps).
     pub half_period_pulses: u64,
-    /// Register writes the AD9959 model applied.
+    /// SPI frames (transactions) the AD9959 model applied, each of one or more register
+    /// writes.
     pub dds_writes: u64,
     /// Ticks after which the DDS's three channels were not phase-locked (2k, k, 3k).
     pub unlocked_ticks: u64,

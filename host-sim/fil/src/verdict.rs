@@ -160,7 +160,7 @@ pub struct Summary {
     /// Of those, pulses half a period after DRDY (two steps per sample).
     #[serde(default)]
     pub half_period_pulses: u64,
-    /// Register writes the AD9959 model applied.
+    /// SPI frames the AD9959 model applied (one or more register writes each).
     pub dds_writes: u64,
     /// Ticks after which the DDS's channels were not phase-locked (pump 2k, refs k, 3k).
     pub dds_unlocked_ticks: u64,
