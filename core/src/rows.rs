@@ -23,21 +23,25 @@
 //! the small δθ) are filtered as they are.
 //!
 //! **A drifting coefficient.** The filter does not commute with a coefficient that moves:
-//! for θ(t) = θ + θ′t, `H[θB] = θ(t − 2/w)·F0(B) + (2θ′/w²)·F1(B)` to first order
-//! (`H = w²/(s + w)²`, whose first moment is `H·2/(s + w)`). The first term is why a
-//! drift's estimate lags by the filter's group delay 2/w (the estimator reads it advanced,
-//! module `drift`); the second is a term proportional to the envelope's derivative that
-//! no column carries, so a warm-up's θ22′ otherwise leaks into θ21, θ23 and θ24 (and the
-//! rate). The sense's fundamental rows subtract it, `(2θ22′/w²)·F1(B1) = g·F1(B1)`, with
-//! θ22′ the drift the estimator tracks ([`RowBuilder::push_projected`]'s `g_sense`). The
-//! drive's θ12′ has the same term in the drive rows, and the DC and third-harmonic rows
-//! have theirs; they are left out for the tick's cost (the sense fundamental is the row
-//! the rate is read from, and its θ22 column the large one).
+//! for θ(t) = θ + θ′t, exactly, `H[θB] = θ(t − 2/w)·F0(B) + (2θ′/w²)·L[F1(B)]`
+//! (`H = w²/(s + w)²`; its first-moment filter `−H′(s) = 2w²/(s + w)³` is
+//! `(2/w)·H·(1 − s/(s + w))`; `L = w/(s + w)`, the filter's first stage). The first term
+//! is why a drift's estimate lags by the filter's group delay 2/w (the estimator reads it
+//! advanced, module `drift`); the second is a term proportional to the envelope's
+//! derivative that no column carries, so a warm-up's θ22′ otherwise leaks into θ21, θ23
+//! and θ24 (and the rate). `L` matters: the pump dither moves the envelopes at 5 Hz,
+//! where the 10 Hz stage has a gain of 0.89 and a phase of −27°, and the phase leaks into
+//! the other columns. The sense's fundamental rows subtract the term,
+//! `g·L[F1(B1)]` with `g = 2θ22′/w²` and θ22′ the drift the estimator tracks
+//! ([`RowBuilder::push_projected`]'s `g_sense`; `L` FOH-exact, [`PoleState`]). The drive's
+//! θ12′ has the same term in the drive rows, and the DC and third-harmonic rows have
+//! theirs; they are left out for the tick's cost (the sense fundamental is the row the
+//! rate is read from, and its θ22 column the large one).
 
 use crate::complex::Cplx;
 use crate::harmonics::{AxisProj, SynthTables, project};
 use crate::real::Real;
-use crate::svf::{CSvfState, SvfCoeffs, SvfState};
+use crate::svf::{CSvfState, PoleState, SvfCoeffs, SvfState};
 
 /// Rows per axis per sample.
 pub const NROWS: usize = 5;
@@ -236,6 +240,8 @@ pub struct RowBuilder<T> {
     nom: NominalConsts<T>,
     h: [HarmFilters<T>; 2],
     dc: DcFilters<T>,
+    /// `L[F1(B1)]`, the sense drift's term (module docs, "A drifting coefficient").
+    b1_drift: PoleState<T>,
     started: bool,
 }
 
@@ -246,6 +252,7 @@ impl<T: Real> RowBuilder<T> {
             nom,
             h: [HarmFilters::default(); 2],
             dc: DcFilters::default(),
+            b1_drift: PoleState::default(),
             started: false,
         }
     }
@@ -467,6 +474,8 @@ impl<T: Real> RowBuilder<T> {
             d.ay = SvfState::at_rest(din.ay);
             d.vx = SvfState::at_rest(din.vx);
             d.vy = SvfState::at_rest(din.vy);
+            // at rest F1 = 0
+            self.b1_drift = PoleState::default();
             self.started = true;
         }
         let c = design.svf;
@@ -535,7 +544,8 @@ impl<T: Real> RowBuilder<T> {
             rows.sense_y[r + 1] = zy.im;
         }
         // the drifting θ22's term in the sense fundamental (module docs)
-        rows.sense_y[1] -= g_sense * b1_f1.re;
-        rows.sense_y[2] -= g_sense * b1_f1.im;
+        let l = self.b1_drift.update(&c, b1_f1);
+        rows.sense_y[1] -= g_sense * l.re;
+        rows.sense_y[2] -= g_sense * l.im;
     }
 }

@@ -336,7 +336,7 @@ fn a_warm_up_is_followed_without_resets_in_the_loop() {
 
 /// The warm-up within the tick budget (mean 12 000, max 15 000 instructions, exact).
 /// Measured (`cargo run --release -p paragyro-fil -- warm-up`, `summary.json`
-/// `instr_mean`, `instr_max`): mean 11 741, max 14 220. Its dither runs throughout, and
+/// `instr_mean`, `instr_max`): mean 11 723, max 14 175. Its dither runs throughout, and
 /// every tick updates both RLS and writes both pump steps to the DDS, one SPI frame each
 /// (`firmware/scripts/fil-profile.sh warm-up`); `fw-drift-retune`, whose mean the
 /// README's budget row quotes, stops its dither for its last 4 of 10 s.
