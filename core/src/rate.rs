@@ -37,7 +37,7 @@
 //! amplitude × frequency^2.3 and ∝ `svf_hz`^2.7; the same with no rate, with the lock-in
 //! low-pass at 100 or 200 Hz, and with a plant integrated twice as finely). Each output of
 //! the wide filter is corrected, `F_j − ε_j u″` with `u″ = F2/(1+ε2)` (a few
-//! multiply-adds per signal): the noise-free tone is then ≈ 0.08 °/s (0.067 °/s rms
+//! multiply-adds per signal): the noise-free tone is then ≈ 0.08 °/s (0.064 °/s rms
 //! deterministic error with the band taps below). Above a few tens of Hz the correction,
 //! exact for slow curvature, leaves `F0`'s ratio to the continuous filter 2–6 % from `F1`'s
 //! at 60–100 Hz, and the row balances `2iω·F1(B)` against the quadrature's `θ23·F0(A)`: the
@@ -47,7 +47,8 @@
 //! ([`crate::svf::band_taps`], shipped for the default design; firmware/docs/notes.md
 //! "DDS words"). The narrow channel (40 Hz, `wT` = 0.5, `ε2` = −2 %) has no band taps.
 //!
-//! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2` with `μ̂xy = −(θ14 + θ24)/2` of the slow RLS.
+//! Rate: `γ̂ = −(θ̂24 + μ̂xy)/2`, μ̂xy the rate's zero: `−(θ14 + θ24)/2` of the slow RLS
+//! averaged with a `rate.zero_memory_s` memory ([`RateState::hold_zero`]).
 //!
 //! # Keeping the slow identification out of rate transients
 //!

@@ -190,7 +190,8 @@ fn rate_step_in_the_loop() {
         s.rate_dps_est,
         s.host_only.rate_dps_est
     );
-    // the scale factor over the last second (measured +0.043 %; host-sim/docs/rate-channel.md)
+    // the scale factor over the last second (measured +0.043 %; firmware/docs/notes.md
+    // "Firmware in the loop")
     assert!(
         (s.rate_dps_mean_last_s - 100.0).abs() <= 0.3,
         "rate {}",
