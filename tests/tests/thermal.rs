@@ -332,6 +332,32 @@ fn the_thermal_report_reads_the_warm_up() {
     assert!(paragyro_simulator::thermal::ThermalReport::of(&plain, &r.trace).is_err());
 }
 
+/// Runs the warm-up `sc` (f32) and asserts the targets on it: no covariance reset
+/// after the start-up, the rate valid on ≥ 99 % of the ramp, its error rms during the ramp
+/// ≤ 1.2× its rms before it, the sense amplitude ≥ 98 % of the oracle twin's (pump at
+/// 2·f_y) at every second. `case` names the case in the failure messages.
+fn assert_warm_up_targets(sc: &Scenario, case: &str) {
+    let r = run_f32(sc);
+    let rep = paragyro_simulator::thermal::ThermalReport::of(sc, &r.trace).expect("a report");
+    let oracle = paragyro_simulator::thermal::oracle_sense_amp(sc, sc.seed).expect("oracle");
+    let rep = rep.with_oracle(&r.trace, &oracle);
+    let ratio = rep.rate_err_rms_during_dps / rep.rate_err_rms_before_dps;
+    let what = format!(
+        "{case}: resets {}, valid {:.1} %, error {:.2}×, sense {:?}",
+        rep.resets_after_startup,
+        100.0 * rep.valid_during,
+        ratio,
+        rep.sense_amp_vs_oracle_min
+    );
+    assert_eq!(rep.resets_after_startup, 0, "{what}");
+    assert!(rep.valid_during >= 0.99, "{what}");
+    assert!(ratio <= 1.2, "{what}");
+    assert!(
+        rep.sense_amp_vs_oracle_min.expect("whole seconds") >= 0.98,
+        "{what}"
+    );
+}
+
 /// The targets on the CI's short warm-up, 10 K over 20 s (seed 1, the scenario's):
 /// at −30/−33 ppm/K with and without the die temperature and at equal TCFs with it, no
 /// covariance reset after the start-up, the rate valid on ≥ 99 % of the ramp, its error
@@ -346,25 +372,7 @@ fn a_20_s_warm_up_holds_the_rate_on_its_seed() {
         let t = sc.temperature.as_mut().expect("a profile");
         t.tcf_wy_ppm_k = tcf_wy;
         t.sensor = sensor;
-        let r = run_f32(&sc);
-        let rep = paragyro_simulator::thermal::ThermalReport::of(&sc, &r.trace).expect("a report");
-        let oracle = paragyro_simulator::thermal::oracle_sense_amp(&sc, sc.seed).expect("oracle");
-        let rep = rep.with_oracle(&r.trace, &oracle);
-        let ratio = rep.rate_err_rms_during_dps / rep.rate_err_rms_before_dps;
-        let what = format!(
-            "TCF {tcf_wy}, sensor {sensor}: resets {}, valid {:.1} %, error {:.2}×, sense {:?}",
-            rep.resets_after_startup,
-            100.0 * rep.valid_during,
-            ratio,
-            rep.sense_amp_vs_oracle_min
-        );
-        assert_eq!(rep.resets_after_startup, 0, "{what}");
-        assert!(rep.valid_during >= 0.99, "{what}");
-        assert!(ratio <= 1.2, "{what}");
-        assert!(
-            rep.sense_amp_vs_oracle_min.expect("whole seconds") >= 0.98,
-            "{what}"
-        );
+        assert_warm_up_targets(&sc, &format!("TCF {tcf_wy}, sensor {sensor}"));
     }
 }
 
@@ -381,24 +389,6 @@ fn a_40_s_warm_up_holds_the_rate_at_both_tcfs() {
         t.points = vec![[0.0, 25.0], [5.0, 25.0], [45.0, 35.0]];
         t.tcf_wy_ppm_k = tcf_wy;
         sc.duration_s = 47.0;
-        let r = run_f32(&sc);
-        let rep = paragyro_simulator::thermal::ThermalReport::of(&sc, &r.trace).expect("a report");
-        let oracle = paragyro_simulator::thermal::oracle_sense_amp(&sc, sc.seed).expect("oracle");
-        let rep = rep.with_oracle(&r.trace, &oracle);
-        let ratio = rep.rate_err_rms_during_dps / rep.rate_err_rms_before_dps;
-        let what = format!(
-            "TCF {tcf_wy}: resets {}, valid {:.1} %, error {:.2}×, sense {:?}",
-            rep.resets_after_startup,
-            100.0 * rep.valid_during,
-            ratio,
-            rep.sense_amp_vs_oracle_min
-        );
-        assert_eq!(rep.resets_after_startup, 0, "{what}");
-        assert!(rep.valid_during >= 0.99, "{what}");
-        assert!(ratio <= 1.2, "{what}");
-        assert!(
-            rep.sense_amp_vs_oracle_min.expect("whole seconds") >= 0.98,
-            "{what}"
-        );
+        assert_warm_up_targets(&sc, &format!("TCF {tcf_wy}"));
     }
 }
