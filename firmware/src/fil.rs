@@ -310,6 +310,8 @@ pub struct FromFw {
     pub wy2: f64,
     /// Rate estimate, °/s.
     pub rate_dps: f64,
+    /// The rate's own validity flag (`RateOutput::valid`).
+    pub rate_valid: bool,
     /// Firmware counters (ADC SPI, CRC, not ready, saturated; accel errors, saturated;
     /// DDS errors, guard clamps), DRDY missing, core retunes, core bad samples, accelerometer
     /// samples refused as stuck.
@@ -343,6 +345,7 @@ impl FromFw {
         pump_hz: f64::NAN,
         wy2: f64::NAN,
         rate_dps: f64::NAN,
+        rate_valid: false,
         counters: [0; COUNTERS],
         pulse_at_insns: 0,
         tick_insns: 0,
@@ -365,7 +368,7 @@ impl FromFw {
             u8::from(self.inputs_valid),
             u8::from(self.updated),
             self.events,
-            0,
+            u8::from(self.rate_valid),
             0,
             0,
         ]);
@@ -394,7 +397,7 @@ impl FromFw {
     pub fn decode(b: &[u8; FROM_FW_BYTES]) -> Self {
         let mut g = Get { buf: b, pos: 0 };
         let tick = g.u32();
-        let [faults, ok, valid, updated, events, _, _, _] = g.array::<8>();
+        let [faults, ok, valid, updated, events, rate_valid, _, _] = g.array::<8>();
         let health = g.u32();
         let pump_hz_next = g.f64();
         let pump_scale_next = g.f64();
@@ -422,6 +425,7 @@ impl FromFw {
             pump_hz,
             wy2,
             rate_dps,
+            rate_valid: rate_valid != 0,
             counters,
             pulse_at_insns,
             tick_insns,
@@ -816,11 +820,13 @@ mod tests {
         f.tick = 3;
         f.wy2 = 1.03;
         f.counters[4] = 17;
+        f.rate_valid = true;
         f.dds_log[..5].copy_from_slice(&[2, 0x00, 0xF2, 0, HALF_PERIOD_PULSE]);
         f.dds_log_len = 5;
         let g = FromFw::decode(&f.encode());
         assert_eq!(g.tick, 3);
         assert_eq!(g.counters, f.counters);
+        assert!(g.rate_valid);
         let e: Vec<_> = g.dds_entries().collect();
         assert_eq!(
             e,

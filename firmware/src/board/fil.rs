@@ -191,7 +191,9 @@ fn report(app: &FilApp<'_>, drdy_missing: u32, out: &mut FromFw) {
     ];
     out.wy2 = app.estimator().wy2();
     // the fast rate channel (the product's rate output; core::rate)
-    out.rate_dps = app.estimator().rate_output().rate_dps;
+    let rate = app.estimator().rate_output();
+    out.rate_dps = rate.rate_dps;
+    out.rate_valid = rate.valid;
     out.pump_hz = app.pump_hz();
 }
 

@@ -49,6 +49,21 @@ struct Cli {
     /// `--host-amplitude-words`.
     #[arg(long)]
     host_frequency_words: bool,
+    /// `warm-up` only: stretch the ramp to this many seconds, the run ending 2 s after it
+    /// (as `paragyro-sim thermal --ramp-s`).
+    #[arg(long, value_name = "S")]
+    ramp_s: Option<f64>,
+    /// `warm-up` only: the ramp's rise, K.
+    #[arg(long, value_name = "K")]
+    rise_k: Option<f64>,
+    /// `warm-up` only: the modes' frequency TCFs, drive and sense, ppm/K.
+    #[arg(
+        long,
+        value_name = "DRIVE,SENSE",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    tcf_ppm_k: Option<Vec<f64>>,
 }
 
 fn main() -> ExitCode {
@@ -108,7 +123,18 @@ fn run() -> anyhow::Result<bool> {
         return budget(&args[1..]);
     }
     let cli = Cli::parse();
-    let mut ls = paragyro_fil::by_name(&cli.scenario)?;
+    let shape = paragyro_fil::WarmUpShape {
+        ramp_s: cli.ramp_s,
+        rise_k: cli.rise_k,
+        tcf_ppm_k: cli.tcf_ppm_k.clone(),
+    };
+    let mut ls = if shape == paragyro_fil::WarmUpShape::default() {
+        paragyro_fil::by_name(&cli.scenario)?
+    } else if cli.scenario == "warm-up" {
+        paragyro_fil::warm_up_shaped(&shape)?
+    } else {
+        anyhow::bail!("--ramp-s, --rise-k and --tcf-ppm-k reshape `warm-up` only");
+    };
     ls.host_words = paragyro_fil::verdict::HostWords {
         amplitude: cli.host_amplitude_words,
         frequency: cli.host_frequency_words,

@@ -83,6 +83,11 @@ pub struct LoopNumbers {
     /// not in `summary.json`).
     #[serde(skip)]
     pub drive_amps: Vec<f64>,
+    /// A warm-up's oracle twin's sense amplitude `(t, |Y1|)` of every sample, µm (its pump
+    /// centre at twice the true sense resonance; empty without a warm-up; not in
+    /// `summary.json`).
+    #[serde(skip)]
+    pub oracle_amp: Vec<(f64, f64)>,
 }
 
 /// The firmware's fault counters at the end, by name.
@@ -339,13 +344,20 @@ fn host_only_warm(
                     rate_dps_true: ls.plant.rate_dps,
                     pump_hz_next: ls.out.pump_hz_next,
                     wy2_true: ls.plant.phys[4],
+                    sense_amp_um: ls.lockin.y_abs(1),
                 });
                 centre_end = ls.est.pump_centre_hz();
             }
         },
     )?;
+    // the oracle twin, on the same plant (the board's pump shape)
+    let oracle_amp = match warm {
+        Some(_) => paragyro_simulator::thermal::oracle_sense_amp(&sc, seed)?,
+        None => Vec::new(),
+    };
     let warm_up = warm.map(|w| {
-        let mut n = WarmUpNumbers::of(&w, &sc, &ticks, est.counters().retunes);
+        let mut n = WarmUpNumbers::of(&w, &sc, &ticks, est.counters().retunes)
+            .with_oracle(&ticks, &oracle_amp);
         n.pump_centre_core_hz = Some(centre_end);
         n.tcf_learned_ppm_k = Some(est.thermal().tcf_ppm_k);
         n
@@ -368,6 +380,7 @@ fn host_only_warm(
         warm_up,
         rates: rates.iter().map(|r| r.2).collect(),
         drive_amps: damp.iter().map(|d| d.1).collect(),
+        oracle_amp,
     })
 }
 
@@ -680,14 +693,15 @@ pub fn summarize(
                 t_s: r.t_s,
                 events: r.fw.events,
                 health: r.fw.health,
-                rate_valid: None,
+                rate_valid: Some(r.fw.rate_valid),
                 rate_dps: r.fw.rate_dps,
                 rate_dps_true: r.rate_dps_true,
                 pump_hz_next: r.fw.pump_hz_next,
                 wy2_true: r.wy2_true,
+                sense_amp_um: r.sense_amp_um,
             })
             .collect();
-        let n = WarmUpNumbers::of(&w, sc, &ticks, c[9]);
+        let n = WarmUpNumbers::of(&w, sc, &ticks, c[9]).with_oracle(&ticks, &host.oracle_amp);
         warm_up_checks(&mut failures, &w, &n, host.warm_up.as_ref());
         n
     });

@@ -73,6 +73,78 @@ pub fn oracle_sense_amp(sc: &Scenario, seed: u64) -> Result<Vec<(f64, f64)>> {
     Ok(amp)
 }
 
+/// The modes' frequency TCFs, drive and sense, ppm/K, set to `tcf` (two finite values)
+/// (`paragyro-sim thermal --tcf-ppm-k`, `paragyro-fil warm-up --tcf-ppm-k`).
+pub fn set_tcf_ppm_k(sc: &mut Scenario, tcf: &[f64]) -> Result<()> {
+    let Some(t) = sc.temperature.as_mut() else {
+        bail!("scenario '{}' has no [temperature] profile", sc.name);
+    };
+    match tcf {
+        [wx, wy] if wx.is_finite() && wy.is_finite() => {
+            (t.tcf_wx_ppm_k, t.tcf_wy_ppm_k) = (*wx, *wy);
+            Ok(())
+        }
+        _ => bail!("--tcf-ppm-k takes two finite values (got {tcf:?})"),
+    }
+}
+
+/// The profile's one ramp (points: held, ramp start, ramp end) stretched to `ramp_s` and
+/// `rise_k`; the run ends 2 s after it (`paragyro-sim thermal --ramp-s/--rise-k`,
+/// `paragyro-fil warm-up --ramp-s/--rise-k`).
+pub fn reshape_ramp(sc: &mut Scenario, ramp_s: Option<f64>, rise_k: Option<f64>) -> Result<()> {
+    let Some(t) = sc.temperature.as_mut() else {
+        bail!("scenario '{}' has no [temperature] profile", sc.name);
+    };
+    let moves = t.points.windows(2).filter(|w| w[1][1] != w[0][1]).count();
+    let Some(&[t0, c0]) = t.points.iter().rev().nth(1) else {
+        bail!("--ramp-s/--rise-k need a profile of one ramp");
+    };
+    if moves != 1 || t.points.last().is_none_or(|l| l[1] == c0) {
+        bail!(
+            "--ramp-s/--rise-k need a profile of one ramp ending at its last point (scenario '{}' has {moves} moves)",
+            sc.name
+        );
+    }
+    let last = t.points.last().copied().unwrap_or([t0, c0]);
+    let dur = ramp_s.unwrap_or(last[0] - t0);
+    let rise = rise_k.unwrap_or(last[1] - c0);
+    if !(dur.is_finite() && dur > 0.0 && rise.is_finite() && rise.abs() <= 200.0) {
+        bail!("--ramp-s must be > 0 and --rise-k within ±200 K (got {dur} s, {rise} K)");
+    }
+    if let Some(l) = t.points.last_mut() {
+        *l = [t0 + dur, c0 + rise];
+    }
+    sc.duration_s = t0 + dur + 2.0;
+    Ok(())
+}
+
+/// The lowest ratio of `amp`'s mean over a whole second of `span` (from its first whole
+/// second on) to `oracle`'s mean over the same second; both `(t, value)`. `None` when no
+/// second of the span has both.
+pub fn lowest_second_ratio(
+    amp: &[(f64, f64)],
+    oracle: &[(f64, f64)],
+    span: (f64, f64),
+) -> Option<f64> {
+    let mean = |v: &[(f64, f64)], t: f64| {
+        let (s, n) = v
+            .iter()
+            .filter(|(ts, _)| (t..t + 1.0).contains(ts))
+            .fold((0.0, 0usize), |(s, n), x| (s + x.1, n + 1));
+        if n == 0 { f64::NAN } else { s / n as f64 }
+    };
+    let mut worst: Option<f64> = None;
+    let mut t = span.0.ceil();
+    while t + 1.0 <= span.1 {
+        let r = mean(amp, t) / mean(oracle, t);
+        if r.is_finite() {
+            worst = Some(worst.map_or(r, |w: f64| w.min(r)));
+        }
+        t += 1.0;
+    }
+    worst
+}
+
 /// Start-up excluded from every figure, s (the identification converges, the dither starts).
 pub const STARTUP_S: f64 = 2.5;
 
@@ -259,32 +331,8 @@ impl ThermalReport {
     /// Adds the comparison with the oracle twin ([`oracle_sense_amp`]): the mean sense
     /// amplitude of each whole second of the change against the twin's.
     pub fn with_oracle(mut self, trace: &[TraceRow], oracle: &[(f64, f64)]) -> Self {
-        let mean = |v: &mut dyn Iterator<Item = f64>| {
-            let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
-            if n == 0 { f64::NAN } else { s / n as f64 }
-        };
-        let mut worst: Option<f64> = None;
-        let mut t = self.change_s.0.ceil();
-        while t + 1.0 <= self.change_s.1 {
-            let a = mean(
-                &mut trace
-                    .iter()
-                    .filter(|r| (t..t + 1.0).contains(&r.t_s))
-                    .map(|r| r.sense_amp_um),
-            );
-            let b = mean(
-                &mut oracle
-                    .iter()
-                    .filter(|(ts, _)| (t..t + 1.0).contains(ts))
-                    .map(|x| x.1),
-            );
-            let r = a / b;
-            if r.is_finite() {
-                worst = Some(worst.map_or(r, |w: f64| w.min(r)));
-            }
-            t += 1.0;
-        }
-        self.sense_amp_vs_oracle_min = worst;
+        let amp: Vec<(f64, f64)> = trace.iter().map(|r| (r.t_s, r.sense_amp_um)).collect();
+        self.sense_amp_vs_oracle_min = lowest_second_ratio(&amp, oracle, self.change_s);
         self
     }
 
@@ -489,5 +537,34 @@ impl ThermalReport {
         }
         root.present()?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_warm_up_ramp_is_stretched_and_other_profiles_are_refused() {
+        let warm = || {
+            Scenario::from_toml_str(include_str!("../../scenarios/warm-up.toml"), "warm-up.toml")
+                .unwrap()
+        };
+        let mut sc = warm();
+        reshape_ramp(&mut sc, Some(300.0), Some(2.0)).unwrap();
+        let t = sc.temperature.as_ref().unwrap();
+        assert_eq!(t.points.last(), Some(&[305.0, 27.0]));
+        assert_eq!(sc.duration_s, 307.0);
+        let mut sc = warm();
+        reshape_ramp(&mut sc, Some(40.0), None).unwrap();
+        assert_eq!(
+            sc.temperature.as_ref().unwrap().points.last(),
+            Some(&[45.0, 35.0])
+        );
+        // a cycle is not one ramp; a zero duration is not a ramp
+        let mut sc = warm();
+        sc.temperature.as_mut().unwrap().points.push([40.0, 25.0]);
+        assert!(reshape_ramp(&mut sc, Some(300.0), None).is_err());
+        assert!(reshape_ramp(&mut warm(), Some(0.0), None).is_err());
     }
 }

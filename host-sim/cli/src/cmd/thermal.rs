@@ -9,7 +9,7 @@ use super::{
 };
 use paragyro_simulator::runner::RunOptions;
 use paragyro_simulator::scenario::Scenario;
-use paragyro_simulator::thermal::{ThermalReport, oracle_sense_amp};
+use paragyro_simulator::thermal::{ThermalReport, oracle_sense_amp, reshape_ramp, set_tcf_ppm_k};
 
 /// `host-sim/scenarios/warm-up.toml`, the default.
 const WARM_UP: &str = include_str!("../../../scenarios/warm-up.toml");
@@ -79,18 +79,11 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     if let Some(t) = a.track_hz {
         sc.estimator.retune_track_hz = Some(non_negative("--track-hz", t)?);
     }
-    if let (Some(tcf), Some(t)) = (&a.tcf_ppm_k, sc.temperature.as_mut()) {
-        if let [wx, wy] = tcf[..]
-            && wx.is_finite()
-            && wy.is_finite()
-        {
-            (t.tcf_wx_ppm_k, t.tcf_wy_ppm_k) = (wx, wy);
-        } else {
-            return Err(Failure {
-                code: EXIT_LOAD,
-                error: anyhow::anyhow!("--tcf-ppm-k takes two finite values (got {tcf:?})"),
-            });
-        }
+    if let Some(tcf) = &a.tcf_ppm_k {
+        set_tcf_ppm_k(&mut sc, tcf).map_err(|error| Failure {
+            code: EXIT_LOAD,
+            error,
+        })?;
     }
     if let (true, Some(t)) = (a.no_sensor, sc.temperature.as_mut()) {
         t.sensor = false;
@@ -157,60 +150,5 @@ fn non_negative(flag: &str, v: f64) -> Result<f64, Failure> {
             code: EXIT_LOAD,
             error: anyhow::anyhow!("{flag} must be finite and >= 0 (got {v})"),
         })
-    }
-}
-
-/// The profile's one ramp (points: held, ramp start, ramp end) stretched to `ramp_s` and
-/// `rise_k`; the run ends 2 s after it.
-fn reshape_ramp(sc: &mut Scenario, ramp_s: Option<f64>, rise_k: Option<f64>) -> anyhow::Result<()> {
-    let Some(t) = sc.temperature.as_mut() else {
-        anyhow::bail!("scenario '{}' has no [temperature] profile", sc.name);
-    };
-    let moves = t.points.windows(2).filter(|w| w[1][1] != w[0][1]).count();
-    let Some(&[t0, c0]) = t.points.iter().rev().nth(1) else {
-        anyhow::bail!("--ramp-s/--rise-k need a profile of one ramp");
-    };
-    if moves != 1 || t.points.last().is_none_or(|l| l[1] == c0) {
-        anyhow::bail!(
-            "--ramp-s/--rise-k need a profile of one ramp ending at its last point (scenario '{}' has {moves} moves)",
-            sc.name
-        );
-    }
-    let last = t.points.last().copied().unwrap_or([t0, c0]);
-    let dur = ramp_s.unwrap_or(last[0] - t0);
-    let rise = rise_k.unwrap_or(last[1] - c0);
-    if !(dur.is_finite() && dur > 0.0 && rise.is_finite() && rise.abs() <= 200.0) {
-        anyhow::bail!("--ramp-s must be > 0 and --rise-k within ±200 K (got {dur} s, {rise} K)");
-    }
-    if let Some(l) = t.points.last_mut() {
-        *l = [t0 + dur, c0 + rise];
-    }
-    sc.duration_s = t0 + dur + 2.0;
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_warm_up_ramp_is_stretched_and_other_profiles_are_refused() {
-        let warm = || Scenario::from_toml_str(WARM_UP, "warm-up.toml").unwrap();
-        let mut sc = warm();
-        reshape_ramp(&mut sc, Some(300.0), Some(2.0)).unwrap();
-        let t = sc.temperature.as_ref().unwrap();
-        assert_eq!(t.points.last(), Some(&[305.0, 27.0]));
-        assert_eq!(sc.duration_s, 307.0);
-        let mut sc = warm();
-        reshape_ramp(&mut sc, Some(40.0), None).unwrap();
-        assert_eq!(
-            sc.temperature.as_ref().unwrap().points.last(),
-            Some(&[45.0, 35.0])
-        );
-        // a cycle is not one ramp; a zero duration is not a ramp
-        let mut sc = warm();
-        sc.temperature.as_mut().unwrap().points.push([40.0, 25.0]);
-        assert!(reshape_ramp(&mut sc, Some(300.0), None).is_err());
-        assert!(reshape_ramp(&mut warm(), Some(0.0), None).is_err());
     }
 }

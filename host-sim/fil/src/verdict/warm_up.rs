@@ -2,6 +2,7 @@
 //! reading of the loop and of the host-only loop.
 
 use super::*;
+use paragyro_simulator::thermal::lowest_second_ratio;
 
 /// A warm-up's pump centre is the core's pump command averaged over at most the last this
 /// long, s (five periods of the 5 Hz frequency dither, which runs to the end): over the
@@ -30,6 +31,8 @@ pub struct WarmUpTick {
     pub pump_hz_next: f64,
     /// True ω_y².
     pub wy2_true: f64,
+    /// The plant's sense amplitude |Y1|, µm.
+    pub sense_amp_um: f64,
 }
 
 /// `Health::bits` of what the rate's validity needs from the health (`rate::assess`):
@@ -58,6 +61,15 @@ pub struct WarmUpNumbers {
     pub rate_valid_share: Option<f64>,
     /// The fast rate's error over the ramp, every sample: rms and largest, °/s.
     pub rate_err_rms_ramp_dps: f64,
+    /// The fast rate's error's rms before the ramp (from the end of the start-up to the
+    /// ramp's start), °/s.
+    pub rate_err_rms_before_dps: f64,
+    /// `rate_err_rms_ramp_dps / rate_err_rms_before_dps`.
+    pub rate_err_ratio: f64,
+    /// The lowest 1 s mean of the sense amplitude during the ramp against the oracle
+    /// twin's, whose pump centre sits at twice the true sense resonance
+    /// (`paragyro_simulator::thermal::oracle_sense_amp`; `None`: not compared).
+    pub sense_amp_vs_oracle_min: Option<f64>,
     pub rate_err_max_ramp_dps: f64,
     /// The pump centre at the end: the core's pump command averaged over whole dither
     /// periods at the end, after the last retune ramp, at most [`PUMP_MEAN_S`], Hz (NaN:
@@ -113,6 +125,16 @@ impl WarmUpNumbers {
             .map(|v| v.iter().filter(|b| **b).count() as f64 / n);
         let err: Vec<f64> = ramp.iter().map(|r| r.rate_dps - r.rate_dps_true).collect();
         let rms = (err.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+        let before: Vec<f64> = ticks
+            .iter()
+            .filter(|r| r.t_s >= w.startup_s && r.t_s < w.ramp_s.0)
+            .map(|r| r.rate_dps - r.rate_dps_true)
+            .collect();
+        let rms_before = if before.is_empty() {
+            f64::NAN
+        } else {
+            (before.iter().map(|e| e * e).sum::<f64>() / before.len() as f64).sqrt()
+        };
         let max = err.iter().map(|e| e.abs()).fold(0.0, f64::max);
         // the sample rate of the ticks (the core's, 500 Hz)
         let fs = match ticks {
@@ -167,6 +189,9 @@ impl WarmUpNumbers {
             rate_health_share: healthy as f64 / n,
             rate_valid_share: valid,
             rate_err_rms_ramp_dps: rms,
+            rate_err_rms_before_dps: rms_before,
+            rate_err_ratio: rms / rms_before,
+            sense_amp_vs_oracle_min: None,
             rate_err_max_ramp_dps: max,
             pump_centre_end_hz: centre,
             pump_centre_samples: len as u32,
@@ -179,6 +204,14 @@ impl WarmUpNumbers {
             retunes,
             tcf_learned_ppm_k: None,
         }
+    }
+
+    /// Adds the comparison of the sense amplitude with the oracle twin's (`oracle`, the
+    /// twin's `(t, |Y1|)` of every sample) over each whole second of the ramp.
+    pub fn with_oracle(mut self, ticks: &[WarmUpTick], oracle: &[(f64, f64)]) -> Self {
+        let amp: Vec<(f64, f64)> = ticks.iter().map(|r| (r.t_s, r.sense_amp_um)).collect();
+        self.sense_amp_vs_oracle_min = lowest_second_ratio(&amp, oracle, self.ramp_s);
+        self
     }
 }
 
@@ -213,6 +246,37 @@ pub(super) fn warm_up_checks(
             100.0 * w.min_valid_share
         ),
     );
+    for (who, n) in [("", Some(fil)), ("host-only: ", host)] {
+        let Some(n) = n else { continue };
+        let v = n.rate_valid_share.unwrap_or(f64::NAN);
+        check(
+            v >= w.min_valid_share,
+            format!(
+                "{who}the rate valid on {:.1} % of the ramp's samples (at least {:.1} %)",
+                100.0 * v,
+                100.0 * w.min_valid_share
+            ),
+        );
+        check(
+            n.rate_err_ratio <= w.max_err_ratio,
+            format!(
+                "{who}the rate's error during the ramp {:.3} °/s rms, {:.2}× its {:.3} °/s before it (at most {}×)",
+                n.rate_err_rms_ramp_dps,
+                n.rate_err_ratio,
+                n.rate_err_rms_before_dps,
+                w.max_err_ratio
+            ),
+        );
+        let a = n.sense_amp_vs_oracle_min.unwrap_or(f64::NAN);
+        check(
+            a >= w.min_sense_vs_oracle,
+            format!(
+                "{who}the sense amplitude down to {:.1} % of the oracle twin's in a second of the ramp (at least {:.1} %)",
+                100.0 * a,
+                100.0 * w.min_sense_vs_oracle
+            ),
+        );
+    }
     check(
         fil.pump_offset_end_hz.abs() <= w.pump_tol_hz,
         format!(
@@ -238,15 +302,6 @@ pub(super) fn warm_up_checks(
             h.resets_drive_after, h.resets_sense_after
         ),
     );
-    let v = h.rate_valid_share.unwrap_or(f64::NAN);
-    check(
-        v >= w.min_valid_share,
-        format!(
-            "host-only: the rate valid on {:.1} % of the ramp's samples (at least {:.1} %)",
-            100.0 * v,
-            100.0 * w.min_valid_share
-        ),
-    );
 }
 
 #[cfg(test)]
@@ -269,7 +324,8 @@ mod tests {
 
     /// A warm-up's figures: resets counted by their events after the start-up only, the
     /// health's share over the ramp only, the pump centre the dithered command's mean over
-    /// the last second.
+    /// the last second, the rate's error during the ramp against before it, the sense
+    /// amplitude against the oracle twin's per whole second of the ramp.
     #[test]
     fn the_warm_up_figures_read_resets_health_and_the_pump_centre() {
         use paragyro_core::output::event::{CHANGE_DRIVE, CHANGE_SENSE};
@@ -298,25 +354,49 @@ mod tests {
                     13_000..=13_260 => centre + 1.5 - 1.5 * f64::from(k - 13_000) / 260.0,
                     _ => centre,
                 };
+                // ±0.2 °/s of error every sample, 3 °/s more at 12 s
+                let noise = if k % 2 == 0 { 0.2 } else { -0.2 };
                 WarmUpTick {
                     t_s: t,
                     events,
                     health,
-                    rate_valid: None,
-                    rate_dps: 150.0 + if k == 6_000 { 3.0 } else { 0.0 },
+                    // 50 of the ramp's samples not valid
+                    rate_valid: Some(!(7_000..7_050).contains(&k)),
+                    rate_dps: 150.0 + noise + if k == 6_000 { 3.0 } else { 0.0 },
                     rate_dps_true: 150.0,
                     pump_hz_next: centre + dither,
                     wy2_true: wy2,
+                    sense_amp_um: 1.5,
                 }
             })
             .collect();
-        let n = WarmUpNumbers::of(&w, sc, &ticks, 2);
+        // the oracle's amplitude 1.5 µm, 1.6 µm over the second from 10 s
+        let oracle: Vec<(f64, f64)> = ticks
+            .iter()
+            .map(|r| {
+                (
+                    r.t_s,
+                    if (10.0..11.0).contains(&r.t_s) {
+                        1.6
+                    } else {
+                        1.5
+                    },
+                )
+            })
+            .collect();
+        let n = WarmUpNumbers::of(&w, sc, &ticks, 2).with_oracle(&ticks, &oracle);
         assert_eq!(n.resets_startup, 1);
         assert_eq!((n.resets_drive_after, n.resets_sense_after), (2, 1));
         assert_eq!(n.ramp_samples, 10_000);
         assert!((n.rate_health_share - 0.99).abs() < 1e-12, "{n:?}");
-        assert_eq!(n.rate_valid_share, None);
-        assert_eq!(n.rate_err_max_ramp_dps, 3.0);
+        assert_eq!(n.rate_valid_share, Some(0.995));
+        assert!((n.rate_err_max_ramp_dps - 3.2).abs() < 1e-9, "{n:?}");
+        assert!((n.rate_err_rms_before_dps - 0.2).abs() < 1e-9, "{n:?}");
+        // (0.04 · 9 999 + 3.2²) / 10 000 within the ramp
+        let ramp_rms = ((0.04 * 9_999.0 + 3.2 * 3.2) / 10_000.0_f64).sqrt();
+        assert!((n.rate_err_ratio - ramp_rms / 0.2).abs() < 1e-9, "{n:?}");
+        let a = n.sense_amp_vs_oracle_min.unwrap();
+        assert!((a - 1.5 / 1.6).abs() < 1e-12, "{n:?}");
         // two whole dither periods after the ramp (240 samples after it)
         assert_eq!(n.pump_centre_samples, 200);
         assert!((n.pump_offset_end_hz - 0.7).abs() < 1e-6, "{n:?}");
@@ -326,6 +406,8 @@ mod tests {
         assert!((n.pump_offset_max_ramp_hz - 2.2).abs() < 1e-6, "{n:?}");
         let mut failures = Vec::new();
         warm_up_checks(&mut failures, &w, &n, Some(&n));
-        assert_eq!(failures.len(), 3, "{failures:?}"); // resets ×2, the host's flag
+        // resets in the loop and the host-only loop, the sense amplitude in both
+        assert_eq!(failures.len(), 4, "{failures:?}");
+        assert!(failures.iter().filter(|f| f.contains("oracle")).count() == 2);
     }
 }
