@@ -624,6 +624,18 @@ impl BlockLpf {
         sums_start(&mut self.sums, u);
     }
 
+    /// Adds the [`mixer_products`] of `xm`, `ym` at the reference phasor `c1 + i·s1` as an
+    /// interior sample of the current block: [`Self::push`] of them, bit for bit.
+    ///
+    /// Out of line on purpose (the plant's loop calls it once per RK4 step): inlined into
+    /// the loop, the 56 running sums were kept in registers across the block and spilled,
+    /// each stored twice per step, and the step took ~40 % longer (`release`, opt-level
+    /// "s"); behind a call they stay in memory, one add and one store each.
+    #[inline(never)]
+    pub fn push_mixed(&mut self, xm: f64, ym: f64, c1: f64, s1: f64) {
+        sums_push(&mut self.sums, &mixer_products(xm, ym, c1, s1));
+    }
+
     /// Adds an interior sample of the current block.
     #[inline(always)]
     pub fn push(&mut self, u: &[f64; NCH]) {

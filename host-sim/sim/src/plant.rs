@@ -270,29 +270,58 @@ struct Drive {
 // THE RIGHT-HAND SIDE OF EQ. (6). Every physical effect of the plant goes here (add new
 // ones as switchable terms); the integrator below never needs to change.
 // =======================================================================================
-/// `d/dτ [X, X', Y, Y']` of paper eq. (6) for the parameters `th` and the pump/input
-/// values `d` at the same instant.
+/// The part of the right-hand side of eq. (6) that depends on the instant but not on the
+/// state: the pumped linear and cubic drive stiffnesses and the two acceleration forces,
+/// for one θ and one [`Drive`]. [`rhs`] takes it ready-made, so the integrator computes it
+/// once per instant of its half-step grid rather than once per RK4 stage (k2 and k3 share
+/// the mid-step instant, and a step's end is the next step's start).
+#[derive(Clone, Copy, Debug)]
+struct Forcing {
+    /// θ12 + pm·θ16, pm = (s − 1) + s·cos2ψ.
+    kx: f64,
+    /// θ15 + pm·θ17.
+    kx3: f64,
+    /// θ18·ãx.
+    accel_x: f64,
+    /// θ26·ãy.
+    accel_y: f64,
+}
+
+impl Forcing {
+    /// The forcing of the parameters `th` at the pump/input values `d`.
+    #[inline(always)]
+    fn of(th: &Theta, d: &Drive) -> Self {
+        let t1 = &th.drive;
+        // pump modulation: the (s−1) shift of the nominal θ12/θ15 plus the s·cos2ψ term
+        let pm = (d.s - 1.0) + d.s * d.cos2psi;
+        Self {
+            kx: t1[1] + pm * t1[5],  // linear stiffness incl. pump
+            kx3: t1[4] + pm * t1[6], // cubic stiffness incl. pump
+            accel_x: t1[7] * d.ax,
+            accel_y: th.sense[5] * d.ay,
+        }
+    }
+}
+
+/// `d/dτ [X, X', Y, Y']` of paper eq. (6) for the parameters `th` and their forcing `f`
+/// ([`Forcing::of`] the pump/input values) at the same instant.
 #[inline(always)]
-fn rhs(th: &Theta, z: &[f64; 4], d: &Drive) -> [f64; 4] {
+fn rhs(th: &Theta, z: &[f64; 4], f: &Forcing) -> [f64; 4] {
     let [x, xd, y, yd] = *z;
     let t1 = &th.drive;
     let t2 = &th.sense;
-    // pump modulation: the (s−1) shift of the nominal θ12/θ15 plus the s·cos2ψ term
-    let pm = (d.s - 1.0) + d.s * d.cos2psi;
-    let kx = t1[1] + pm * t1[5]; // linear stiffness incl. pump
-    let kx3 = t1[4] + pm * t1[6]; // cubic stiffness incl. pump
     // (sums grouped as trees: shorter dependency chains for the integrator)
-    let xdd = (t1[0] * xd + t1[3] * yd) + ((t1[2] * y + t1[7] * d.ax) + x * (kx + kx3 * (x * x)));
-    let ydd =
-        (t2[0] * yd + t2[3] * xd) + ((t2[2] * x + t2[5] * d.ay) + y * (t2[1] + t2[4] * (y * y)));
+    let xdd = (t1[0] * xd + t1[3] * yd) + ((t1[2] * y + f.accel_x) + x * (f.kx + f.kx3 * (x * x)));
+    let ydd = (t2[0] * yd + t2[3] * xd) + ((t2[2] * x + f.accel_y) + y * (t2[1] + t2[4] * (y * y)));
     [xd, xdd, yd, ydd]
 }
 
-/// [`rhs`] plus the effects of [`crate::effects`] (EFFECTS.md terms, non-dimensional).
+/// [`rhs`] plus the effects of [`crate::effects`] (EFFECTS.md terms, non-dimensional); `f`
+/// is the forcing of `th` at `d`.
 #[inline(always)]
-fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
+fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, f: &Forcing, fx: &Effects) -> [f64; 4] {
     let [x, xd, y, yd] = *z;
-    let [_, xdd, _, ydd] = rhs(th, z, d);
+    let [_, xdd, _, ydd] = rhs(th, z, f);
     let (x2, y2) = (x * x, y * y);
     let pump = d.s * (1.0 + d.cos2psi);
     let dx = -fx.geometric * y * (x * y + 2.0 * xd * yd)
@@ -404,9 +433,15 @@ fn terms_of(fx: &Effects) -> u8 {
 /// diagnosis's re-simulations of one effect spent ~25 % of their time (tests:
 /// `rhs_fx_one_is_rhs_fx_bit_for_bit`, `one_effect_runs_as_the_general_path`).
 #[inline(always)]
-fn rhs_fx_one<const T: u8>(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) -> [f64; 4] {
+fn rhs_fx_one<const T: u8>(
+    th: &Theta,
+    z: &[f64; 4],
+    d: &Drive,
+    f: &Forcing,
+    fx: &Effects,
+) -> [f64; 4] {
     let [x, xd, y, yd] = *z;
-    let [_, xdd, _, ydd] = rhs(th, z, d);
+    let [_, xdd, _, ydd] = rhs(th, z, f);
     match T {
         terms::GEOMETRIC => [
             xd,
@@ -446,7 +481,7 @@ fn rhs_fx_one<const T: u8>(th: &Theta, z: &[f64; 4], d: &Drive, fx: &Effects) ->
         }
         // the measurement effects alone: eq. (6)
         terms::MEASUREMENT => [xd, xdd, yd, ydd],
-        _ => rhs_fx(th, z, d, fx),
+        _ => rhs_fx(th, z, d, f, fx),
     }
 }
 
@@ -477,28 +512,28 @@ fn measure_fx(z: &[f64; 4], noise: [f64; 2], d: &Drive, fx: &Effects) -> [f64; 2
 #[inline(always)]
 #[cfg(test)]
 fn rk4_step(th: &Theta, z: &[f64; 4], h: f64, da: &Drive, dh: &Drive, de: &Drive) -> [f64; 4] {
-    rk4_step_g::<{ terms::NONE }>(th, z, h, da, dh, de, &Effects::default())
+    let at = |d: &Drive| (*d, Forcing::of(th, d));
+    rk4_step_g::<{ terms::NONE }>(th, z, h, [at(da), at(dh), at(de)], &Effects::default())
 }
 
-/// [`rk4_step`] with the effect terms `FX` ([`terms`]).
+/// [`rk4_step`] with the effect terms `FX` ([`terms`]); each input comes with its
+/// [`Forcing`].
 #[inline(always)]
 fn rk4_step_g<const FX: u8>(
     th: &Theta,
     z: &[f64; 4],
     h: f64,
-    da: &Drive,
-    dh: &Drive,
-    de: &Drive,
+    [da, dh, de]: [(Drive, Forcing); 3],
     fx: &Effects,
 ) -> [f64; 4] {
-    let rhs = |th: &Theta, z: &[f64; 4], d: &Drive| match FX {
-        terms::NONE => rhs(th, z, d),
-        terms::ALL => rhs_fx(th, z, d, fx),
-        _ => rhs_fx_one::<FX>(th, z, d, fx),
+    let rhs = |th: &Theta, z: &[f64; 4], (d, f): &(Drive, Forcing)| match FX {
+        terms::NONE => rhs(th, z, f),
+        terms::ALL => rhs_fx(th, z, d, f, fx),
+        _ => rhs_fx_one::<FX>(th, z, d, f, fx),
     };
     let hh = 0.5 * h;
     let [x, v, y, w] = *z;
-    let k1 = rhs(th, z, da);
+    let k1 = rhs(th, z, &da);
     let k2 = rhs(
         th,
         &[
@@ -507,7 +542,7 @@ fn rk4_step_g<const FX: u8>(
             y + hh * k1[2],
             w + hh * k1[3],
         ],
-        dh,
+        &dh,
     );
     let k3 = rhs(
         th,
@@ -517,12 +552,12 @@ fn rk4_step_g<const FX: u8>(
             y + hh * k2[2],
             w + hh * k2[3],
         ],
-        dh,
+        &dh,
     );
     let k4 = rhs(
         th,
         &[x + h * k3[0], v + h * k3[1], y + h * k3[2], w + h * k3[3]],
-        de,
+        &de,
     );
     let h6 = h / 6.0;
     [
@@ -864,6 +899,9 @@ impl GyroSim {
                 gv,
                 gvd,
             };
+            // `fa` is always the forcing of `da`: computed here at the block's start, then
+            // taken over with `da` from the previous step's end (the same instant, θ fixed)
+            let mut fa = Forcing::of(&th, &da);
             if HOOK {
                 tau = tau_k + jf * delta;
             }
@@ -871,7 +909,7 @@ impl GyroSim {
                 if i > 0 {
                     let n = self.noise.draw::<NOISE>();
                     let [xm, ym] = meas(&z, &hw, tau, n, rc, rs, &da);
-                    self.lpf.push(&mixer_products(xm, ym, rc, rs));
+                    self.lpf.push_mixed(xm, ym, rc, rs);
                 }
                 let (hc, hs) = ch.step::<CHIRP>();
                 let (gv, gvd) = if FX == terms::ALL {
@@ -901,14 +939,16 @@ impl GyroSim {
                     gv,
                     gvd,
                 };
+                let fe = Forcing::of(&th, &de);
                 if HOOK && let Some(hk) = &hook {
                     (z, hw) =
                         hook::rk4_step_hooked(&th, (&z, &hw), h, [&da, &dh, &de], tau, &fx, hk);
                     tau += h;
                 } else {
-                    z = rk4_step_g::<FX>(&th, &z, h, &da, &dh, &de, &fx);
+                    let steps = [(da, fa), (dh, Forcing::of(&th, &dh)), (de, fe)];
+                    z = rk4_step_g::<FX>(&th, &z, h, steps, &fx);
                 }
-                da = de;
+                (da, fa) = (de, fe);
             }
             // block junction sample (also the first sample of the next block)
             let n = self.noise.draw::<NOISE>();

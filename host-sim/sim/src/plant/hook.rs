@@ -129,7 +129,7 @@ pub(super) fn rk4_step_hooked(
     hook: &PlantHook,
 ) -> ([f64; 4], [f64; HOOK_STATES]) {
     let f = |z: &[f64; 4], w: &[f64; HOOK_STATES], d: &super::Drive, tau: f64| {
-        let b = super::rhs_fx(th, z, d, fx);
+        let b = super::rhs_fx(th, z, d, &super::Forcing::of(th, d), fx);
         let at = HookAt::at(tau, z, w, d);
         let (force, dw) = hook.eval(&at);
         ([b[0], b[1] + force[0], b[2], b[3] + force[1]], dw)

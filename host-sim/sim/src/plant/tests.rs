@@ -429,15 +429,8 @@ fn effect_terms_are_the_documented_ones() {
         gv: 2e-3,
         gvd: -1e-3,
     };
-    let base = rhs(
-        &th,
-        &z,
-        &Drive {
-            gv: 0.0,
-            gvd: 0.0,
-            ..d
-        },
-    );
+    let f = Forcing::of(&th, &d);
+    let base = rhs(&th, &z, &f);
     assert_eq!(
         rhs_fx(
             &th,
@@ -447,6 +440,7 @@ fn effect_terms_are_the_documented_ones() {
                 gvd: 0.0,
                 ..d
             },
+            &f,
             &Effects::default()
         ),
         base
@@ -529,7 +523,7 @@ fn effect_terms_are_the_documented_ones() {
                 ..d
             }
         };
-        let r = rhs_fx(&th, &z, &dd, &fx);
+        let r = rhs_fx(&th, &z, &dd, &f, &fx);
         assert!(
             (r[1] - base[1] - ex).abs() < 1e-15 && (r[3] - base[3] - ey).abs() < 1e-15,
             "{fx:?}"
@@ -678,14 +672,17 @@ fn rhs_fx_one_is_rhs_fx_bit_for_bit() {
                 gv: 0.0 * u(1.0),
                 gvd: 0.0 * u(1.0),
             };
-            let a = rhs_fx(&th, &z, &d, &fx);
+            let f = Forcing::of(&th, &d);
+            let a = rhs_fx(&th, &z, &d, &f, &fx);
             let b = match t {
-                terms::GEOMETRIC => rhs_fx_one::<{ terms::GEOMETRIC }>(&th, &z, &d, &fx),
-                terms::ELECTROSTATIC => rhs_fx_one::<{ terms::ELECTROSTATIC }>(&th, &z, &d, &fx),
-                terms::NL_DAMPING => rhs_fx_one::<{ terms::NL_DAMPING }>(&th, &z, &d, &fx),
-                terms::ANISODAMPING => rhs_fx_one::<{ terms::ANISODAMPING }>(&th, &z, &d, &fx),
-                terms::FORCE_LEAK => rhs_fx_one::<{ terms::FORCE_LEAK }>(&th, &z, &d, &fx),
-                _ => rhs_fx_one::<{ terms::MEASUREMENT }>(&th, &z, &d, &fx),
+                terms::GEOMETRIC => rhs_fx_one::<{ terms::GEOMETRIC }>(&th, &z, &d, &f, &fx),
+                terms::ELECTROSTATIC => {
+                    rhs_fx_one::<{ terms::ELECTROSTATIC }>(&th, &z, &d, &f, &fx)
+                }
+                terms::NL_DAMPING => rhs_fx_one::<{ terms::NL_DAMPING }>(&th, &z, &d, &f, &fx),
+                terms::ANISODAMPING => rhs_fx_one::<{ terms::ANISODAMPING }>(&th, &z, &d, &f, &fx),
+                terms::FORCE_LEAK => rhs_fx_one::<{ terms::FORCE_LEAK }>(&th, &z, &d, &f, &fx),
+                _ => rhs_fx_one::<{ terms::MEASUREMENT }>(&th, &z, &d, &f, &fx),
             };
             assert_eq!(
                 a.map(f64::to_bits),
