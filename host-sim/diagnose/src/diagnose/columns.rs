@@ -339,10 +339,11 @@ impl Columns {
         })
     }
 
-    /// Adds the catch-all's force monomials.
-    pub(crate) fn with_catch_all(mut self, rows: &Rows) -> Self {
+    /// Adds the catch-all's force monomials, `ca` ([`catch_all_columns`], built beside
+    /// [`Columns::build`]).
+    pub(crate) fn with_catch_all_columns(mut self, ca: Vec<Column>) -> Self {
         let start = self.cols.len();
-        self.cols.extend(catch_all_columns(&rows.base, &rows.svf));
+        self.cols.extend(ca);
         self.ca_idx.extend(start..self.cols.len());
         self
     }
@@ -492,7 +493,7 @@ fn library_columns(
 
 /// The catch-all's force monomials: quadratic and cubic in (X, X', Y, Y'), on each axis
 /// (X³ and Y³ are θ15/θ25 already).
-fn catch_all_columns(base: &Pass, svf: &SvfCoeffs<f64>) -> Vec<Column> {
+pub(crate) fn catch_all_columns(base: &Pass, svf: &SvfCoeffs<f64>) -> Vec<Column> {
     let var = |w: &Wave, j: usize, i: usize| match i {
         0 => w.x[j],
         1 => w.xd[j],

@@ -424,7 +424,7 @@ mod tests {
         rows.remove_theta(&fit1.dtheta);
         let cols = columns::Columns::build(&rec, &opts, &rows, &spans)
             .unwrap()
-            .with_catch_all(&rows);
+            .with_catch_all_columns(columns::catch_all_columns(&rows.base, &rows.svf));
         let fits = rank::Fits::build(&cols, &rows, &spans);
         assert!(cols.of(Effect::Anisodamping).is_empty());
         let verdict_cols = cols.of(Effect::Feedthrough);

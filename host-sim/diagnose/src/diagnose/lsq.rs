@@ -152,21 +152,30 @@ impl Bank {
         fit: &[Range<usize>],
         hold: Range<usize>,
     ) -> Self {
+        use rayon::prelude::*;
         let m = cols.len();
-        let blocks: Vec<Gram> = fit
-            .iter()
-            .map(|r| {
-                let mut g = Gram::new(m);
-                g.accumulate(cols, y, r.clone(), ok);
-                g
-            })
-            .collect();
+        // each block's sums on its own thread (the sums in each block and their order
+        // over the blocks as on one thread: the same bits)
+        let (blocks, hg) = rayon::join(
+            || -> Vec<Gram> {
+                fit.par_iter()
+                    .map(|r| {
+                        let mut g = Gram::new(m);
+                        g.accumulate(cols, y, r.clone(), ok);
+                        g
+                    })
+                    .collect()
+            },
+            || {
+                let mut hg = Gram::new(m);
+                hg.accumulate(cols, y, hold, ok);
+                hg
+            },
+        );
         let mut fg = Gram::new(m);
         for b in &blocks {
             fg.add(b);
         }
-        let mut hg = Gram::new(m);
-        hg.accumulate(cols, y, hold, ok);
         Bank {
             blocks,
             fit: fg,

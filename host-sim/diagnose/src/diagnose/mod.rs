@@ -496,27 +496,39 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     // the simulator's lock-in noise at the reference density: the record's noise level is
     // measured against it (ν²), and each row's noise level is it through this record's rows
     let e1 = resim::lockin_noise_diff_energy(rec)?;
-    let (nu2, row_noise) = noise_levels(rec, &rows, &spans, &fit1.dtheta, &e1, &mut limits);
-    timing.tick("row_noise");
     let cfg_model = opts.model.clone();
-    let (face, _device) = calibrate::face(
-        &cfg_model,
-        &opts_cal.model,
-        &rows,
-        &fit1,
-        nu2,
-        if opts_cal.resimulate {
-            1 + CALIBRATION_RESIMULATIONS
-        } else {
-            1
+    // the noise levels and the parameter face beside the candidates' columns (the
+    // vibration's beat scanned) and the catch-all's: independent, each on its own thread
+    let mut noise_limits = Vec::new();
+    let ((nu2, row_noise, face), (cols, ca)) = rayon::join(
+        || {
+            let (nu2, row_noise) =
+                noise_levels(rec, &rows, &spans, &fit1.dtheta, &e1, &mut noise_limits);
+            let (face, _device) = calibrate::face(
+                &cfg_model,
+                &opts_cal.model,
+                &rows,
+                &fit1,
+                nu2,
+                if opts_cal.resimulate {
+                    1 + CALIBRATION_RESIMULATIONS
+                } else {
+                    1
+                },
+            );
+            (nu2, row_noise, face)
+        },
+        || {
+            rayon::join(
+                || columns::Columns::build(rec, &opts_cal, &rows, &spans),
+                || columns::catch_all_columns(&rows.base, &rows.svf),
+            )
         },
     );
-    timing.tick("parameter_face");
+    limits.extend(noise_limits);
+    timing.tick("noise_face_and_columns");
     let opts = &opts_cal;
-    // 2. the candidates' columns (the vibration's beat scanned), then the catch-all
-    let cols = columns::Columns::build(rec, opts, &rows, &spans)?;
-    timing.tick("library_columns_and_beat_scan");
-    let cols = cols.with_catch_all(&rows);
+    let cols = cols?.with_catch_all_columns(ca);
     // a sample whose gap or any column is not finite, or beyond [`ROW_MAX`], is not usable
     // (the columns are built from the record's envelopes: a row the reader kept with NaN
     // or ∞, or with a value so large that its square overflows the Gram sums)

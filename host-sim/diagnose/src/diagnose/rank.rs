@@ -48,17 +48,27 @@ impl Fits {
             .filter(|&e| !cols.of(e).is_empty())
             .collect();
         let all_lib: Vec<usize> = tested.iter().flat_map(|&e| cols.of(e)).collect();
-        let ca_fit = bank.fit(&cols.with(&cols.ca_idx));
+        use rayon::prelude::*;
         let everything: Vec<usize> = cols.ca_idx.iter().chain(&all_lib).copied().collect();
-        let floor_fit = bank.fit(&cols.with(&everything));
-        let cand_fits: Vec<(Effect, Vec<usize>, Fit)> = tested
-            .iter()
-            .map(|&e| {
-                let ci = cols.of(e);
-                let f = bank.fit(&cols.with(&ci));
-                (e, ci, f)
-            })
-            .collect();
+        // the fits are independent: each on its own thread
+        let ((ca_fit, floor_fit), cand_fits) = rayon::join(
+            || {
+                rayon::join(
+                    || bank.fit(&cols.with(&cols.ca_idx)),
+                    || bank.fit(&cols.with(&everything)),
+                )
+            },
+            || -> Vec<(Effect, Vec<usize>, Fit)> {
+                tested
+                    .par_iter()
+                    .map(|&e| {
+                        let ci = cols.of(e);
+                        let f = bank.fit(&cols.with(&ci));
+                        (e, ci, f)
+                    })
+                    .collect()
+            },
+        );
         // the floor: the best held-out energy any model reaches (the everything-model can
         // generalise worse than a single candidate to the held-out operating point)
         let e_floor = cand_fits
