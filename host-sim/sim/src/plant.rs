@@ -53,7 +53,10 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
 
+mod forcing;
 pub mod hook;
+
+use forcing::Forcing;
 
 /// Table 2 Coriolis coefficient γ (150 °/s), the core's `TABLE2.gamma`.
 pub const GAMMA_TABLE2: f64 = paragyro_core::physics::TABLE2.gamma;
@@ -270,39 +273,6 @@ struct Drive {
 // THE RIGHT-HAND SIDE OF EQ. (6). Every physical effect of the plant goes here (add new
 // ones as switchable terms); the integrator below never needs to change.
 // =======================================================================================
-/// The part of the right-hand side of eq. (6) that depends on the instant but not on the
-/// state: the pumped linear and cubic drive stiffnesses and the two acceleration forces,
-/// for one θ and one [`Drive`]. [`rhs`] takes it ready-made, so the integrator computes it
-/// once per instant of its half-step grid rather than once per RK4 stage (k2 and k3 share
-/// the mid-step instant, and a step's end is the next step's start).
-#[derive(Clone, Copy, Debug)]
-struct Forcing {
-    /// θ12 + pm·θ16, pm = (s − 1) + s·cos2ψ.
-    kx: f64,
-    /// θ15 + pm·θ17.
-    kx3: f64,
-    /// θ18·ãx.
-    accel_x: f64,
-    /// θ26·ãy.
-    accel_y: f64,
-}
-
-impl Forcing {
-    /// The forcing of the parameters `th` at the pump/input values `d`.
-    #[inline(always)]
-    fn of(th: &Theta, d: &Drive) -> Self {
-        let t1 = &th.drive;
-        // pump modulation: the (s−1) shift of the nominal θ12/θ15 plus the s·cos2ψ term
-        let pm = (d.s - 1.0) + d.s * d.cos2psi;
-        Self {
-            kx: t1[1] + pm * t1[5],  // linear stiffness incl. pump
-            kx3: t1[4] + pm * t1[6], // cubic stiffness incl. pump
-            accel_x: t1[7] * d.ax,
-            accel_y: th.sense[5] * d.ay,
-        }
-    }
-}
-
 /// `d/dτ [X, X', Y, Y']` of paper eq. (6) for the parameters `th` and their forcing `f`
 /// ([`Forcing::of`] the pump/input values) at the same instant.
 #[inline(always)]

@@ -484,6 +484,61 @@ fn noise_levels(
     (nu2, row_noise)
 }
 
+/// Stages 1c and 2 of [`diagnose_stages`], independent, each on its own thread: the
+/// noise levels and the parameter face; the candidates' columns (the vibration's beat
+/// scanned) with the catch-all's.
+#[allow(clippy::too_many_arguments)]
+fn noise_face_and_columns(
+    rec: &Record,
+    opts: &Options,
+    opts_cal: &Options,
+    rows: &rows::Rows,
+    spans: &rows::Spans,
+    fit1: &calibrate::ThetaFit,
+    e1: &[f64; 10],
+    limits: &mut Vec<report::Limitation>,
+) -> (
+    f64,
+    [f64; NR],
+    calibrate::ParameterFace,
+    anyhow::Result<columns::Columns>,
+) {
+    let cfg_model = opts.model.clone();
+    let mut noise_limits = Vec::new();
+    let ((nu2, row_noise, face), (cols, ca)) = rayon::join(
+        || {
+            let (nu2, row_noise) =
+                noise_levels(rec, rows, spans, &fit1.dtheta, e1, &mut noise_limits);
+            let (face, _device) = calibrate::face(
+                &cfg_model,
+                &opts_cal.model,
+                rows,
+                fit1,
+                nu2,
+                if opts_cal.resimulate {
+                    1 + CALIBRATION_RESIMULATIONS
+                } else {
+                    1
+                },
+            );
+            (nu2, row_noise, face)
+        },
+        || {
+            rayon::join(
+                || columns::Columns::build(rec, opts_cal, rows, spans),
+                || columns::catch_all_columns(&rows.base, &rows.svf),
+            )
+        },
+    );
+    limits.extend(noise_limits);
+    (
+        nu2,
+        row_noise,
+        face,
+        cols.map(|c| c.with_catch_all_columns(ca)),
+    )
+}
+
 /// The stages of [`diagnose`]; an error when the record cannot be taken at all.
 fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Result<Diagnosis> {
     let mut timing = Timing::new();
@@ -496,39 +551,12 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     // the simulator's lock-in noise at the reference density: the record's noise level is
     // measured against it (ν²), and each row's noise level is it through this record's rows
     let e1 = resim::lockin_noise_diff_energy(rec)?;
-    let cfg_model = opts.model.clone();
-    // the noise levels and the parameter face beside the candidates' columns (the
-    // vibration's beat scanned) and the catch-all's: independent, each on its own thread
-    let mut noise_limits = Vec::new();
-    let ((nu2, row_noise, face), (cols, ca)) = rayon::join(
-        || {
-            let (nu2, row_noise) =
-                noise_levels(rec, &rows, &spans, &fit1.dtheta, &e1, &mut noise_limits);
-            let (face, _device) = calibrate::face(
-                &cfg_model,
-                &opts_cal.model,
-                &rows,
-                &fit1,
-                nu2,
-                if opts_cal.resimulate {
-                    1 + CALIBRATION_RESIMULATIONS
-                } else {
-                    1
-                },
-            );
-            (nu2, row_noise, face)
-        },
-        || {
-            rayon::join(
-                || columns::Columns::build(rec, &opts_cal, &rows, &spans),
-                || columns::catch_all_columns(&rows.base, &rows.svf),
-            )
-        },
-    );
-    limits.extend(noise_limits);
+    let (nu2, row_noise, face, cols) =
+        noise_face_and_columns(rec, opts, &opts_cal, &rows, &spans, &fit1, &e1, &mut limits);
     timing.tick("noise_face_and_columns");
+    let cfg_model = opts.model.clone();
     let opts = &opts_cal;
-    let cols = cols?.with_catch_all_columns(ca);
+    let cols = cols?;
     // a sample whose gap or any column is not finite, or beyond [`ROW_MAX`], is not usable
     // (the columns are built from the record's envelopes: a row the reader kept with NaN
     // or ∞, or with a value so large that its square overflows the Gram sums)
