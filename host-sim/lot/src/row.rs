@@ -14,12 +14,10 @@ pub const PARAM_SUFFIXES: [&str; 6] = ["model", "device", "sigma", "rel", "rel_s
 
 /// The diagnosis's stages (report.json's `timing_s` keys), each a column `time_{stage}_s`;
 /// a stage not listed here is added to `time_other_s`.
-pub const TIMING_STAGES: [&str; 9] = [
+pub const TIMING_STAGES: [&str; 7] = [
     "rows",
     "calibration_fit",
-    "row_noise",
-    "parameter_face",
-    "library_columns_and_beat_scan",
+    "noise_face_and_columns",
     "catch_all_and_grams",
     "ranking_and_where",
     "confirm_by_resimulation",

@@ -490,7 +490,7 @@ fn noise_levels(
 #[allow(clippy::too_many_arguments)]
 fn noise_face_and_columns(
     rec: &Record,
-    opts: &Options,
+    configured: &Model,
     opts_cal: &Options,
     rows: &rows::Rows,
     spans: &rows::Spans,
@@ -503,14 +503,13 @@ fn noise_face_and_columns(
     calibrate::ParameterFace,
     anyhow::Result<columns::Columns>,
 ) {
-    let cfg_model = opts.model.clone();
     let mut noise_limits = Vec::new();
     let ((nu2, row_noise, face), (cols, ca)) = rayon::join(
         || {
             let (nu2, row_noise) =
                 noise_levels(rec, rows, spans, &fit1.dtheta, e1, &mut noise_limits);
             let (face, _device) = calibrate::face(
-                &cfg_model,
+                configured,
                 &opts_cal.model,
                 rows,
                 fit1,
@@ -551,8 +550,16 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     // the simulator's lock-in noise at the reference density: the record's noise level is
     // measured against it (ν²), and each row's noise level is it through this record's rows
     let e1 = resim::lockin_noise_diff_energy(rec)?;
-    let (nu2, row_noise, face, cols) =
-        noise_face_and_columns(rec, opts, &opts_cal, &rows, &spans, &fit1, &e1, &mut limits);
+    let (nu2, row_noise, face, cols) = noise_face_and_columns(
+        rec,
+        &opts.model,
+        &opts_cal,
+        &rows,
+        &spans,
+        &fit1,
+        &e1,
+        &mut limits,
+    );
     timing.tick("noise_face_and_columns");
     let cfg_model = opts.model.clone();
     let opts = &opts_cal;
