@@ -115,6 +115,36 @@ pub(crate) fn run_pass(
     Ok(p)
 }
 
+/// The timing stage of a whole-record re-simulation: the model's, or with effects (the
+/// confirmation's).
+fn resim_stage(effects: &[EffectSpec]) -> &'static str {
+    if effects.is_empty() {
+        "resimulate_model"
+    } else {
+        "resimulate_to_confirm"
+    }
+}
+
+/// The simulator re-run on the record's inputs with the model of `opts`.
+fn resim<'a>(
+    rec: &'a Record,
+    opts: &'a Options,
+    gamma: Option<f64>,
+    rate_ref: Option<&'a [f64]>,
+    effects: &'a [EffectSpec],
+    vib_phase0: f64,
+) -> Resim<'a> {
+    Resim {
+        rec,
+        model: &opts.model,
+        gamma,
+        rate_ref,
+        effects,
+        vib_phase0,
+        steps_per_period: opts.steps_per_period,
+    }
+}
+
 /// γ per °/s at the record's ω0.
 pub(crate) fn gamma_per_dps(omega0: f64) -> f64 {
     gamma_from_rate_dps(1.0, omega0)
@@ -232,7 +262,25 @@ impl Rows {
         let cfg = model_config(rec, &opts.model, gamma_nom);
         let (th1m, _) = theta_from_physical(&cfg.nominal);
         let svf = SvfCoeffs::<f64>::new(TAU * cfg.svf_hz / omega0, omega0 / fs);
-        let base = run_pass(rec, &cfg, &|_, _| {})?;
+        // with a rate table the re-simulation takes the table's rate, not one fitted on the
+        // record's rows: it runs first, and the record's pass beside the simulator's (the
+        // same passes, on both cores)
+        let early = if opts.resimulate && rate_ref.is_some() {
+            let sim = resim(rec, opts, None, rate_ref.as_deref(), effects, vib_phase0).run(0..n)?;
+            timing.tick(resim_stage(effects));
+            let sim_rec = with_lockin(rec, &sim);
+            let (base, ps) = rayon::join(
+                || run_pass(rec, &cfg, &|_, _| {}),
+                || run_pass(&sim_rec, &cfg, &|_, _| {}),
+            );
+            Some((base?, sim, ps?))
+        } else {
+            None
+        };
+        let (base, early) = match early {
+            Some((base, sim, ps)) => (base, Some((sim, ps))),
+            None => (run_pass(rec, &cfg, &|_, _| {})?, None),
+        };
         let gamma_col: Vec<[f64; NR]> = base
             .theta
             .iter()
@@ -269,7 +317,10 @@ impl Rows {
         };
         rows.gamma_sim = rows.rate_ref.is_none().then(|| rows.fitted_rate());
         timing.tick("rows");
-        rows.subtract_simulator(rec, opts, effects, vib_phase0, timing)?;
+        match early {
+            Some((sim, ps)) => rows.subtract_simulated(sim, &ps),
+            None => rows.subtract_simulator(rec, opts, effects, vib_phase0, timing)?,
+        }
         Ok(rows)
     }
 
@@ -310,6 +361,17 @@ impl Rows {
         self.gamma_nom + if gg > 0.0 { gy / gg } else { 0.0 }
     }
 
+    /// Subtracts the simulator's rows (its pass `ps` on its lock-in outputs `sim`).
+    fn subtract_simulated(&mut self, sim: Vec<LockinOut>, ps: &Pass) {
+        for (k, y) in self.y.iter_mut().enumerate() {
+            for r in 0..NR {
+                y[r] -= ps.y[k][r];
+            }
+            self.usable[k] &= ps.usable[k];
+        }
+        self.before_sim = Some(sim);
+    }
+
     /// The gap is the record's rows minus the simulator's rows on the same inputs: the
     /// rows' own approximations (lock-in products, truncated harmonics) cancel. Without
     /// the re-simulation, a known rate's column times (γ_ref(t) − γ_nom) is subtracted.
@@ -323,29 +385,18 @@ impl Rows {
     ) -> anyhow::Result<()> {
         let n = self.t.len();
         if opts.resimulate {
-            let resim = Resim {
+            let resim = resim(
                 rec,
-                model: &opts.model,
-                gamma: self.gamma_sim,
-                rate_ref: self.rate_ref.as_deref(),
+                opts,
+                self.gamma_sim,
+                self.rate_ref.as_deref(),
                 effects,
                 vib_phase0,
-                steps_per_period: opts.steps_per_period,
-            };
+            );
             let sim = resim.run(0..n)?;
             let ps = run_pass(&with_lockin(rec, &sim), &self.cfg, &|_, _| {})?;
-            for k in 0..n {
-                for r in 0..NR {
-                    self.y[k][r] -= ps.y[k][r];
-                }
-                self.usable[k] &= ps.usable[k];
-            }
-            self.before_sim = Some(sim);
-            timing.tick(if effects.is_empty() {
-                "resimulate_model"
-            } else {
-                "resimulate_to_confirm"
-            });
+            self.subtract_simulated(sim, &ps);
+            timing.tick(resim_stage(effects));
         } else if let Some(rr) = &self.rate_ref {
             for k in 0..n {
                 let dg = self.gpd * rr[k] - self.gamma_nom;
