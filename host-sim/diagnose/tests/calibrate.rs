@@ -9,7 +9,10 @@ use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::calibrate::ParamDeviation;
 use paragyro_diagnose::diagnose::confirm::HOPELESS_UNEXPLAINED;
-use paragyro_diagnose::diagnose::{Options, Report, SHARE_MIN, T_SIG, diagnose};
+use paragyro_diagnose::diagnose::{
+    CALIBRATION_MAX_RESIMULATIONS, CALIBRATION_RESIMULATIONS, Options, Report, SHARE_MIN, T_SIG,
+    diagnose,
+};
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
 use rand::SeedableRng;
@@ -327,7 +330,9 @@ fn a_large_thermal_drift_is_named_at_its_size_by_the_linear_test() {
 }
 
 /// The bench's slowest-path record (60 s, a force leak at 7e-4 and a Coulomb friction no
-/// library effect explains): the linear test leaves `unknown`, the force leak and the
+/// library effect explains) with the calibration's usual two steps
+/// (`calibration_steps`; by default it has not converged after them and takes the
+/// confirmation's runs, the next test): the linear test leaves `unknown`, the force leak and the
 /// pump-driven softening go to the confirmation, and each run at its linear size leaves
 /// more of the held-out gap than the calibrated model without it (90× and 174×, on the
 /// sense 1st-harmonic rows), while its first Gauss–Newton step reverses its size (the
@@ -338,7 +343,11 @@ fn a_large_thermal_drift_is_named_at_its_size_by_the_linear_test() {
 #[test]
 fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
     let rec = slowest_path_record().unwrap();
-    let r = diagnose(&rec, &Options::default()).unwrap().report;
+    let opts = Options {
+        calibration_steps: CALIBRATION_RESIMULATIONS,
+        ..Options::default()
+    };
+    let r = diagnose(&rec, &opts).unwrap().report;
     assert_eq!(r.verdict.to_string(), "unknown", "{:?}", r.confirmation);
     let tested: Vec<&str> = r
         .confirmation
@@ -352,6 +361,25 @@ fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
         assert_eq!(c.runs.len(), 1, "{c:?}");
         assert!(c.unexplained > HOPELESS_UNEXPLAINED, "{c:?}");
     }
+}
+
+/// The same record with the defaults: after the calibration's two steps the next would
+/// still move a θ by more than its σ, so the calibration takes further steps from the
+/// confirmation's budget (four in all, the budget spent), and with no run left the
+/// confirmation makes none: four whole-record runs, as with the two candidates above.
+#[test]
+fn a_calibration_that_has_not_converged_takes_the_confirmations_runs() {
+    let rec = slowest_path_record().unwrap();
+    let r = diagnose(&rec, &Options::default()).unwrap().report;
+    assert_eq!(r.verdict.to_string(), "unknown", "{:?}", r.limitations);
+    assert_eq!(
+        r.parameter_face.resimulations,
+        1 + CALIBRATION_MAX_RESIMULATIONS,
+        "{:?}",
+        r.limitations
+    );
+    assert!(r.confirmation.is_empty(), "{:?}", r.confirmation);
+    assert!(!r.timing_s.contains_key("resimulate_to_confirm"));
 }
 
 /// A large geometric nonlinearity (−5e-6, 50× its detection limit) on a toleranced

@@ -31,9 +31,11 @@ pub struct DiagnoseOpts {
     /// Skip the re-simulation (no output error, faster).
     #[arg(long)]
     pub no_resim: bool,
-    /// Whole-record re-simulations the confirmation of large effects may make (each about
-    /// a third of the time of a 60 s record's diagnosis; more lets a candidate take more
-    /// Gauss–Newton steps, 0 turns the confirmation off).
+    /// Whole-record re-simulations beyond the calibration's first two (each about a
+    /// fifth of the time of a 60 s record's diagnosis): a calibration that has not
+    /// converged takes further steps from them first, the confirmation of large effects
+    /// has the rest (more lets a candidate take more Gauss–Newton steps; 0 turns both
+    /// off).
     #[arg(long, value_name = "N", default_value_t = paragyro_diagnose::diagnose::confirm::CONFIRM_RUNS)]
     pub confirm_runs: usize,
 }

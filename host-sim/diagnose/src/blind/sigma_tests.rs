@@ -116,7 +116,7 @@ fn record(s: u64) -> (Record, DeviceDraw, Scenario) {
 pub(super) fn check_device(s: u64, k: u64) -> DeviceCheck {
     let (rec, dev, sc) = record(s);
     let opts = Options::default();
-    let (rows, spans, opts_cal, fit) =
+    let (rows, spans, opts_cal, fit, _) =
         calibration(&rec, &opts, &mut Timing::new(), &mut Vec::new()).expect("a calibration");
     let (_, device) = calibrate::face(&opts.model, &opts_cal.model, &rows, &fit, 1.0, 0);
     let (d, sn) = theta_from_physical(&device);

@@ -419,7 +419,7 @@ mod tests {
         let (rec, _) = simulate_record_with(&sc, &ro, &mut |_| {}).unwrap();
         let mut timing = Timing::new();
         let mut limits = Vec::new();
-        let (mut rows, spans, opts, fit1) =
+        let (mut rows, spans, opts, fit1, _) =
             calibration(&rec, &Options::default(), &mut timing, &mut limits).unwrap();
         rows.remove_theta(&fit1.dtheta);
         let cols = columns::Columns::build(&rec, &opts, &rows, &spans)

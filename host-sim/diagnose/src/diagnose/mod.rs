@@ -138,6 +138,30 @@ pub const NOISE_ROW_PROFILE: [f64; NR] = [
 /// re-simulation did not follow the record (their noise estimate ν² 2–4× the truth, and
 /// `unknown` on a clean device: `examples/clean`, devices 200–215); after two none was.
 pub const CALIBRATION_RESIMULATIONS: usize = 2;
+/// Calibration steps at most. Beyond [`CALIBRATION_RESIMULATIONS`] a step is taken only
+/// while the last fit would still move some θ by more than
+/// [`confirm::CONVERGED_THETA_SIGMAS`] of its σ (not converged), and each such step is
+/// taken from the confirmation's budget of whole-record runs ([`Options::confirm_runs`]),
+/// so a diagnosis still makes at most four. A device whose trajectory is sensitive to its
+/// parameters (the drive near zero amplitude under the pump's steps, a rate-table
+/// reversal) needs them: on development records, clean devices two steps left `unknown`
+/// at 19× and 1.3× their noise read `none` (docs/notes.md, "Clean devices through a
+/// reversal").
+pub const CALIBRATION_MAX_RESIMULATIONS: usize = 4;
+
+/// The largest |Δθ|/σ of a calibration fit: what its next step would move.
+fn calibration_step_sigmas(fit: &calibrate::ThetaFit) -> f64 {
+    (0..14)
+        .map(|j| {
+            let sd = fit.cov.get(j * 14 + j).map_or(0.0, |v| v.max(0.0).sqrt());
+            if sd > 0.0 {
+                (fit.dtheta[j] / sd).abs()
+            } else {
+                f64::INFINITY
+            }
+        })
+        .fold(0.0, f64::max)
+}
 /// `none` needs the held-out residual of the calibrated model at most this × the
 /// record's own noise per row (otherwise a gap is there, explained or not).
 pub const NONE_NOISE_MAX: f64 = 1.1;
@@ -256,9 +280,14 @@ pub struct Options {
     pub resimulate: bool,
     /// RK4 steps per carrier period of the re-run.
     pub steps_per_period: usize,
-    /// Whole-record re-simulations the confirmation may make in all
-    /// ([`confirm::CONFIRM_RUNS`] by default: the bound on the diagnosis's time).
+    /// Whole-record re-simulations beyond the calibration's first
+    /// [`CALIBRATION_RESIMULATIONS`] ([`confirm::CONFIRM_RUNS`] by default: the bound on
+    /// the diagnosis's time): the calibration's further steps while it has not converged
+    /// take from it first, the confirmation by re-simulation has the rest.
     pub confirm_runs: usize,
+    /// Calibration steps at most ([`CALIBRATION_MAX_RESIMULATIONS`] by default; at most
+    /// [`CALIBRATION_RESIMULATIONS`] leaves the whole budget to the confirmation).
+    pub calibration_steps: usize,
 }
 
 impl Default for Options {
@@ -268,6 +297,7 @@ impl Default for Options {
             resimulate: true,
             steps_per_period: 128,
             confirm_runs: confirm::CONFIRM_RUNS,
+            calibration_steps: CALIBRATION_MAX_RESIMULATIONS,
         }
     }
 }
@@ -320,7 +350,7 @@ pub(crate) fn calibration(
     opts: &Options,
     timing: &mut Timing,
     limits: &mut Vec<report::Limitation>,
-) -> anyhow::Result<(rows::Rows, rows::Spans, Options, calibrate::ThetaFit)> {
+) -> anyhow::Result<(rows::Rows, rows::Spans, Options, calibrate::ThetaFit, usize)> {
     let no_resim = Options {
         resimulate: false,
         ..opts.clone()
@@ -341,15 +371,32 @@ pub(crate) fn calibration(
         )),
     }
     timing.tick("calibration_fit");
+    let mut steps = 0;
     if opts.resimulate {
-        for step in 0..CALIBRATION_RESIMULATIONS {
+        for step in 0..opts.calibration_steps.max(1) {
+            if step >= CALIBRATION_RESIMULATIONS {
+                let moved = calibration_step_sigmas(&fit);
+                if moved <= confirm::CONVERGED_THETA_SIGMAS {
+                    break;
+                }
+                let extra = step + 1 - CALIBRATION_RESIMULATIONS;
+                if extra > opts.confirm_runs {
+                    limits.push(report::Limitation::new(
+                        "calibration",
+                        format!(
+                            "not converged after {step} steps (the next would move a θ by {moved:.1} σ) and the budget of whole-record runs spent: `none` is judged against the residual it leaves"
+                        ),
+                    ));
+                    break;
+                }
+            }
             let model = if step > 0 {
                 let m = calibrate::calibrated_model(&opts_cal.model, &rows, &fit, &label);
                 if let Some(why) = calibrate::unphysical(&m) {
                     limits.push(report::Limitation::new(
                         "calibration",
                         format!(
-                            "step {} of {CALIBRATION_RESIMULATIONS} estimated a model that is not physical ({why}): the model of step {step} is kept",
+                            "step {} estimated a model that is not physical ({why}): the model of step {step} is kept",
                             step + 1
                         ),
                     ));
@@ -372,6 +419,7 @@ pub(crate) fn calibration(
                     spans = s;
                     opts_cal = o;
                     fit = calibrate::fit_theta(&rows, &spans);
+                    steps = step + 1;
                 }
                 Err(e) if step == 0 => {
                     limits.push(report::Limitation::new(
@@ -390,7 +438,7 @@ pub(crate) fn calibration(
                     limits.push(report::Limitation::new(
                         "calibration",
                         format!(
-                            "the re-simulation of step {} of {CALIBRATION_RESIMULATIONS} failed ({e:#}): the model of step {step} is kept",
+                            "the re-simulation of step {} failed ({e:#}): the model of step {step} is kept",
                             step + 1
                         ),
                     ));
@@ -399,7 +447,22 @@ pub(crate) fn calibration(
             }
         }
     }
-    Ok((rows, spans, opts_cal, fit))
+    if steps > CALIBRATION_RESIMULATIONS && steps == opts.calibration_steps {
+        let moved = calibration_step_sigmas(&fit);
+        if moved > confirm::CONVERGED_THETA_SIGMAS {
+            limits.push(report::Limitation::new(
+                "calibration",
+                format!(
+                    "not converged after {steps} steps (the next would move a θ by {moved:.1} σ): `none` is judged against the residual it leaves"
+                ),
+            ));
+        }
+    }
+    // the steps beyond the usual ones were the confirmation's
+    opts_cal.confirm_runs = opts
+        .confirm_runs
+        .saturating_sub(steps.saturating_sub(CALIBRATION_RESIMULATIONS));
+    Ok((rows, spans, opts_cal, fit, steps))
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
@@ -514,11 +577,8 @@ fn noise_face_and_columns(
                 rows,
                 fit1,
                 nu2,
-                if opts_cal.resimulate {
-                    1 + CALIBRATION_RESIMULATIONS
-                } else {
-                    1
-                },
+                // the caller's count of the calibration's passes replaces it
+                0,
             );
             (nu2, row_noise, face)
         },
@@ -543,7 +603,8 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
     let mut timing = Timing::new();
     let mut limits: Vec<report::Limitation> = Vec::new();
     // 1. the rows and 1b. the calibration (the parameter face)
-    let (mut rows, spans, opts_cal, fit1) = calibration(rec, opts, &mut timing, &mut limits)?;
+    let (mut rows, spans, opts_cal, fit1, cal_steps) =
+        calibration(rec, opts, &mut timing, &mut limits)?;
     // the calibration's refinement is part of the model: the structural face starts from
     // the gap it leaves
     rows.remove_theta(&fit1.dtheta);
@@ -561,6 +622,8 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
         &mut limits,
     );
     timing.tick("noise_face_and_columns");
+    let mut face = face;
+    face.resimulations = 1 + if opts_cal.resimulate { cal_steps } else { 0 };
     let cfg_model = opts.model.clone();
     let opts = &opts_cal;
     let cols = cols?;
