@@ -4,6 +4,10 @@
 //! warm start at another temperature starts at 2·f_y there (`core/src/thermal.rs`). The
 //! runs are the scenario's seed (1) but where a test names its seeds.
 
+use std::any::Any;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
 use paragyro_core::persist::Start;
 use paragyro_simulator::runner::{Precision, RunOptions, closed_loop, core_config, run};
 use paragyro_simulator::scenario::{EventKind, Scenario};
@@ -17,6 +21,35 @@ fn run_f32(sc: &Scenario) -> RunResult {
     run(sc, &opts, &mut |_| {}).expect("run failed")
 }
 
+/// What `make` gives for `sc`, made once per test binary: several tests read the same runs
+/// (the warm-up as written, and without its sensor) and the same oracle. Keyed by `what`
+/// and the scenario as printed; a test asking while another makes it waits for it.
+fn shared<T: Send + Sync + 'static>(what: &str, sc: &Scenario, make: impl FnOnce() -> T) -> Arc<T> {
+    type Cell = Arc<OnceLock<Arc<dyn Any + Send + Sync>>>;
+    static CELLS: OnceLock<Mutex<HashMap<String, Cell>>> = OnceLock::new();
+    let cell = CELLS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap()
+        .entry(format!("{what} {sc:?}"))
+        .or_default()
+        .clone();
+    let v = cell.get_or_init(|| Arc::new(make()) as Arc<dyn Any + Send + Sync>);
+    v.clone().downcast::<T>().expect("one type per key")
+}
+
+/// [`run_f32`] of `sc`, shared between the tests (see [`shared`]).
+fn run_shared(sc: &Scenario) -> Arc<RunResult> {
+    shared("run f32", sc, || run_f32(sc))
+}
+
+/// The oracle twin's sense amplitude for `sc` on its seed, shared between the tests.
+fn oracle_shared(sc: &Scenario) -> Arc<Vec<(f64, f64)>> {
+    shared("oracle", sc, || {
+        paragyro_simulator::thermal::oracle_sense_amp(sc, sc.seed).expect("oracle")
+    })
+}
+
 fn warm_up() -> Scenario {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -28,7 +61,7 @@ fn warm_up() -> Scenario {
 #[test]
 fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
     let mut sc = warm_up();
-    let r = run_f32(&sc);
+    let r = run_shared(&sc);
     let first = &r.trace[0];
     let last = r.trace.last().expect("a trace");
     // the plant moved with the die temperature: 10 K at −33 ppm/K is −660 ppm on ω_y²
@@ -70,7 +103,7 @@ fn a_10_k_warm_up_is_followed_as_a_drift_without_resets() {
 
     // without the sensor the walk alone follows the same ramp
     sc.temperature.as_mut().expect("a profile").sensor = false;
-    let walk = run_f32(&sc);
+    let walk = run_shared(&sc);
     assert_eq!(resets_after(&walk, 2.5), 0, "resets without the sensor");
     assert!(
         walk.trace
@@ -95,21 +128,40 @@ fn the_warm_up_onset_is_not_a_cascade_of_resets_on_any_seed() {
     // the onset on every seed: the wander learned before a reset is kept (relearned from
     // the drifting device, it would take the drift for wander and each reset would bring
     // the next) and the drive walks with the sense's drift (core `drift`).
-    let mut seen = Vec::new();
-    for seed in 1..=6 {
-        for sensor in [true, false] {
-            let mut sc = warm_up();
-            sc.seed = seed;
-            sc.temperature.as_mut().expect("a profile").sensor = sensor;
-            let r = run_f32(&sc);
-            seen.push((
-                seed,
-                sensor,
-                resets_after(&r, 2.5),
-                valid_share(&r, 5.0, 25.0),
-            ));
+    // the twelve runs on the machine's cores (each one thread), in this order
+    let cases: Vec<(u64, bool)> = (1..=6)
+        .flat_map(|seed| [(seed, true), (seed, false)])
+        .collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let done = Mutex::new(Vec::new());
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get().min(cases.len()));
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(&(seed, sensor)) = cases.get(i) else {
+                        break;
+                    };
+                    let mut sc = warm_up();
+                    sc.seed = seed;
+                    sc.temperature.as_mut().expect("a profile").sensor = sensor;
+                    let r = run_shared(&sc);
+                    let w = (
+                        seed,
+                        sensor,
+                        resets_after(&r, 2.5),
+                        valid_share(&r, 5.0, 25.0),
+                    );
+                    done.lock().unwrap().push((i, w));
+                }
+            });
         }
-    }
+    });
+    let mut done = done.into_inner().unwrap();
+    done.sort_by_key(|d| d.0);
+    let seen: Vec<_> = done.into_iter().map(|d| d.1).collect();
+    assert_eq!(seen.len(), cases.len());
     assert!(
         seen.iter().all(|w| w.2 == 0 && w.3 >= 0.99),
         "(seed, sensor, resets, rate valid during the ramp): {seen:?}"
@@ -293,7 +345,7 @@ fn a_jump_of_the_sense_frequency_is_still_detected_and_retuned() {
 #[test]
 fn the_thermal_report_reads_the_warm_up() {
     let sc = warm_up();
-    let r = run_f32(&sc);
+    let r = run_shared(&sc);
     let t = paragyro_simulator::thermal::ThermalReport::of(&sc, &r.trace).expect("a report");
     assert_eq!((t.change_s, t.temp_c), ((5.0, 25.0), (25.0, 35.0)));
     assert_eq!(t.resets_after_startup, 0);
@@ -312,7 +364,7 @@ fn the_thermal_report_reads_the_warm_up() {
     );
     // the sense amplitude against the oracle twin whose pump sits at 2·f_y: ≥ 98 % at every
     // second of the warm-up
-    let oracle = paragyro_simulator::thermal::oracle_sense_amp(&sc, sc.seed).expect("oracle");
+    let oracle = oracle_shared(&sc);
     assert_eq!(oracle.len(), r.trace.len());
     let t = t.with_oracle(&r.trace, &oracle);
     let worst = t.sense_amp_vs_oracle_min.expect("20 whole seconds");
@@ -337,9 +389,9 @@ fn the_thermal_report_reads_the_warm_up() {
 /// ≤ 1.2× its rms before it, the sense amplitude ≥ 98 % of the oracle twin's (pump at
 /// 2·f_y) at every second. `case` names the case in the failure messages.
 fn assert_warm_up_targets(sc: &Scenario, case: &str) {
-    let r = run_f32(sc);
+    let r = run_shared(sc);
     let rep = paragyro_simulator::thermal::ThermalReport::of(sc, &r.trace).expect("a report");
-    let oracle = paragyro_simulator::thermal::oracle_sense_amp(sc, sc.seed).expect("oracle");
+    let oracle = oracle_shared(sc);
     let rep = rep.with_oracle(&r.trace, &oracle);
     let ratio = rep.rate_err_rms_during_dps / rep.rate_err_rms_before_dps;
     let what = format!(
