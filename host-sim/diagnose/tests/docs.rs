@@ -38,8 +38,16 @@ fn z_of(sc: &Scenario, r: &Report) -> Vec<(&'static str, f64)> {
 
 #[test]
 fn docs_examples_read_as_documented() {
+    // the three records made and diagnosed side by side (each simulation one thread)
+    let (ex1, ex2, ex3) = std::thread::scope(|s| {
+        let ex1 = s.spawn(|| example("dev-wy2.toml", &[]));
+        let ex2 = s.spawn(|| example("dev-toleranced.toml", &["nonlinear_damping=1e-6"]));
+        let ex3 = example("dev-toleranced.toml", &[]);
+        (ex1.join().unwrap(), ex2.join().unwrap(), ex3)
+    });
+
     // example 1: ωy² +0.1 %, `none`, ωy² the one deviation at 3σ, found within 2σ
-    let (sc, r) = example("dev-wy2.toml", &[]);
+    let (sc, r) = ex1;
     assert_eq!(r.verdict.to_string(), "none");
     let z = z_of(&sc, &r);
     println!("dev-wy2: {z:?}, residual {:.3}", r.residual_over_noise);
@@ -63,7 +71,7 @@ fn docs_examples_read_as_documented() {
 
     // example 2: a toleranced device with nonlinear damping 1e-6: named, within 3σ, the
     // output error mostly closed; the ten tolerances found (within 3σ of the truth)
-    let (sc, r) = example("dev-toleranced.toml", &["nonlinear_damping=1e-6"]);
+    let (sc, r) = ex2;
     assert_eq!(r.verdict.to_string(), "nonlinear_damping");
     let c = &r.ranking[0];
     let (size, sd) = (c.size.unwrap(), c.size_sigma.unwrap());
@@ -80,7 +88,7 @@ fn docs_examples_read_as_documented() {
     assert!(z.iter().all(|(_, z)| z.abs() < 3.0), "{z:?}");
 
     // the same device without the effect: `none`, at its noise
-    let (_, r) = example("dev-toleranced.toml", &[]);
+    let (_, r) = ex3;
     assert_eq!(r.verdict.to_string(), "none");
     assert!(r.residual_over_noise < 1.1, "{}", r.residual_over_noise);
 }
