@@ -8,15 +8,29 @@
 //! added through the plant hook) and above its detection limit. Run 3 printed the last share
 //! without gating it: its only out-of-library type, the quadratic stiffness, lies inside the
 //! calibration's span. The in-span control (the pick-off lag) is printed, not gated.
+//!
+//! The run is left in `target/blind-ci/` (records, sealed labels, diagnoses, score.md and
+//! score.json): `.ci/run` prints its score.
+
+use std::path::PathBuf;
 
 use paragyro_diagnose::blind;
 
+/// `target/blind-ci` of the workspace (or of `CARGO_TARGET_DIR`), emptied first.
+fn out_dir() -> PathBuf {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../target")));
+    let dir = target.join("blind-ci");
+    std::fs::remove_dir_all(&dir).ok();
+    dir
+}
+
 #[test]
 fn small_blind_run_meets_its_thresholds() {
-    let dir = std::env::temp_dir().join(format!("paragyro-blind-ci-{}", std::process::id()));
+    let dir = out_dir();
     let sm = blind::run(8, 7, &dir, &|m| println!("{m}")).unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    println!("{sm:#?}");
+    println!("{sm:#?} ({})", dir.display());
     let at_least = |v: Option<f64>, min: f64, what: &str| {
         if let Some(v) = v {
             assert!(v >= min, "{what}: {v} < {min}");
