@@ -338,6 +338,44 @@ fn the_results_table_of_the_host_sim_guide_is_what_results_gives() {
     );
 }
 
+/// The rows whose source is `paragyro-fil -- budget` alone: with `PARAGYRO_FW_FIGURES=1`
+/// their measured flash, RAM and tick against the artifacts `bash .ci/run` leaves (the test
+/// above checks every other row, and these against the budgets); `.ci/run` runs this one
+/// after it measures them, without regenerating the simulated rows' sources.
+#[test]
+fn the_headline_firmware_rows_are_the_measured_figures() {
+    let readme = read("README.md");
+    let (budget, measured) = budget_source();
+    let rows: Vec<_> = headline_rows(&readme)
+        .into_iter()
+        .filter(|r| r.2.contains("paragyro-fil -- budget"))
+        .collect();
+    assert!(
+        !rows.is_empty(),
+        "no headline row names `paragyro-fil -- budget`"
+    );
+    if !measured {
+        eprintln!(
+            "headline: the firmware's measured figures not checked (PARAGYRO_FW_FIGURES=1 after bash .ci/run)"
+        );
+        return;
+    }
+    let bad: Vec<String> = rows
+        .iter()
+        .filter_map(|(figure, value, _)| {
+            let miss = missing(value, &budget);
+            (!miss.is_empty()).then(|| {
+                format!("{figure}: {value}: the source does not give {miss:?}; it gives:\n{budget}")
+            })
+        })
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "README.md headline table:\n{}",
+        bad.join("\n")
+    );
+}
+
 #[test]
 fn budgets_in_the_headline_are_the_enforced_ones() {
     let readme = read("README.md");
