@@ -7,7 +7,8 @@
 //! compare tracing, `--cfg fuzzing`; no sanitizer, which would need nightly) for the host
 //! triple named explicitly, so the flags reach the targets and not the build scripts, into
 //! `target/libfuzzer/`. Each target then runs for `--secs` seconds (default 20) with a fixed
-//! seed over
+//! seed, two single-threaded targets side by side (one core each; `diagnosis`, whose
+//! stages take both cores, alone), over
 //!
 //! * a scratch corpus `target/libfuzzer/corpus/<target>/` (what libFuzzer finds goes there,
 //!   never into the repository),
@@ -44,6 +45,28 @@ const SANCOV: &str = "-Cpasses=sancov-module \
     -Cllvm-args=-sanitizer-coverage-pc-table \
     -Cllvm-args=-sanitizer-coverage-trace-compares \
     --cfg fuzzing";
+
+/// Targets whose code runs on several threads (the diagnosis's rayon stages): fuzzed
+/// alone; the others two at a time, one per core.
+const THREADED: [&str; 1] = ["diagnosis"];
+
+/// The targets (with their index, which gives the seed) in lanes run side by side: two
+/// single-threaded ones together, a threaded one alone; in the given order otherwise.
+fn lanes(targets: &[&'static str]) -> Vec<Vec<(usize, &'static str)>> {
+    let mut lanes: Vec<Vec<(usize, &'static str)>> = Vec::new();
+    let mut open: Option<usize> = None;
+    for (i, &t) in targets.iter().enumerate() {
+        if THREADED.contains(&t) {
+            lanes.push(vec![(i, t)]);
+        } else if let Some(k) = open.take() {
+            lanes[k].push((i, t));
+        } else {
+            open = Some(lanes.len());
+            lanes.push(vec![(i, t)]);
+        }
+    }
+    lanes
+}
 
 /// Seconds per target when not given.
 pub const DEFAULT_SECS: u32 = 20;
@@ -126,9 +149,30 @@ pub fn run_targets(targets: &[&'static str], secs: u32) -> Result<(), String> {
     }
     let bin_dir = out.join(&host).join("release");
     let mut figures = Vec::new();
-    for (i, t) in targets.iter().enumerate() {
-        figures.push(run_one(&root, &out, &bin_dir, t, secs, 1 + i as u64)?);
+    for lane in lanes(targets) {
+        // each target of a lane on its own core, for its full `secs` (libFuzzer's loop is
+        // one thread; the diagnosis's own threads take both cores, so it runs alone)
+        let done: Vec<Result<Figures, String>> = std::thread::scope(|s| {
+            let runs: Vec<_> = lane
+                .iter()
+                .map(|&(i, t)| {
+                    let (root, out, bin_dir) = (&root, &out, &bin_dir);
+                    s.spawn(move || run_one(root, out, bin_dir, t, secs, 1 + i as u64))
+                })
+                .collect();
+            runs.into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err("a fuzz run panicked".into()))
+                })
+                .collect()
+        });
+        for (&(i, _), f) in lane.iter().zip(done) {
+            figures.push((i, f?));
+        }
     }
+    figures.sort_by_key(|f| f.0);
+    let figures: Vec<Figures> = figures.into_iter().map(|f| f.1).collect();
     let table = summary(&figures);
     println!("{table}");
     let json = out.join("summary.json");
@@ -302,6 +346,21 @@ mod tests {
         assert_eq!(last_status(log), (41, 8));
         assert_eq!(stat("no stats\n", "stat::number_of_executed_units:"), None);
         assert_eq!(last_status("nothing"), (0, 0));
+    }
+
+    #[test]
+    fn pairs_single_threaded_targets_and_runs_the_diagnosis_alone() {
+        let l = lanes(&TARGETS);
+        assert_eq!(
+            l,
+            vec![
+                vec![(0, "ads131m08_frame"), (1, "record_reader")],
+                vec![(2, "scenario_parser"), (3, "estimator_step")],
+                vec![(4, "diagnosis")],
+            ]
+        );
+        let l = lanes(&["diagnosis", "record_reader"]);
+        assert_eq!(l, vec![vec![(0, "diagnosis")], vec![(1, "record_reader")]]);
     }
 
     #[test]
