@@ -18,8 +18,8 @@ DURATION_S = 8.0
 
 
 def _sim_bin() -> Path:
-    """The `paragyro-sim` binary: PARAGYRO_SIM_BIN (cargo xtask sets it), else built in
-    release (as cargo xtask builds it and the package)."""
+    """The `paragyro-sim` binary: PARAGYRO_SIM_BIN (cargo xtask sets it: the one `cargo test
+    --workspace` builds, in the test profile), else built in release."""
     env = os.environ.get("PARAGYRO_SIM_BIN")
     if env:
         return Path(env)

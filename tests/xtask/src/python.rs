@@ -9,8 +9,10 @@
 //! 3. the package built and installed into it: `maturin develop --release` (the release
 //!    profile: CI builds the same dependencies in release for its later steps anyway;
 //!    `--profile test` cannot be used, `cargo rustc --profile test` builds a test harness);
-//! 4. the CLI the tests compare against, `cargo build --release -p paragyro-sim` (the
-//!    same profile; CI's blind run uses it next), handed over as `PARAGYRO_SIM_BIN`;
+//! 4. the CLI the tests compare against: the `paragyro-sim` binary `cargo test --workspace`
+//!    builds (in the test profile, for `host-sim/cli/tests/binary.rs`; `cargo test
+//!    --workspace --no-run`, at once after `cargo xtask test`'s test run, which just built
+//!    it), handed over as `PARAGYRO_SIM_BIN`;
 //! 5. `pytest host-sim/py/tests`.
 //!
 //! `--no-python` or `PARAGYRO_SKIP_PYTHON=1` skips all of it.
@@ -22,9 +24,11 @@ use std::time::Instant;
 
 use crate::{cargo, say};
 
-/// The cargo profile of the extension and of the CLI it is compared with (its output
-/// directory has the same name).
+/// The cargo profile of the extension.
 const PROFILE: &str = "release";
+
+/// The output directory of the test profile, where `cargo test` builds the CLI.
+const TEST_PROFILE_DIR: &str = "debug";
 
 /// The workspace root (this crate is `tests/xtask`).
 fn root() -> PathBuf {
@@ -79,18 +83,16 @@ pub fn test(pytest_args: &[String]) -> Result<(), String> {
         "maturin develop",
     )?;
     took("the package", t);
-    say(&format!(
-        "cargo build --profile {PROFILE} -p paragyro-sim (the CLI the tests compare with)"
-    ));
+    say("cargo test --workspace --no-run (the CLI the tests compare with, as the tests build it)");
     let t = Instant::now();
     run(
         Command::new(cargo())
-            .args(["build", "-q", "--profile", PROFILE, "-p", "paragyro-sim"])
+            .args(["test", "-q", "--workspace", "--no-run"])
             .current_dir(&root),
-        "cargo build -p paragyro-sim",
+        "cargo test --workspace --no-run",
     )?;
     took("the CLI", t);
-    let sim = target.join(PROFILE).join("paragyro-sim");
+    let sim = target.join(TEST_PROFILE_DIR).join("paragyro-sim");
     say("pytest host-sim/py/tests");
     let t = Instant::now();
     run(
