@@ -559,6 +559,7 @@ fn noise_face_and_columns(
     spans: &rows::Spans,
     fit1: &calibrate::ThetaFit,
     e1: &[f64; 10],
+    cal_passes: usize,
     limits: &mut Vec<report::Limitation>,
 ) -> (
     f64,
@@ -571,15 +572,8 @@ fn noise_face_and_columns(
         || {
             let (nu2, row_noise) =
                 noise_levels(rec, rows, spans, &fit1.dtheta, e1, &mut noise_limits);
-            let (face, _device) = calibrate::face(
-                configured,
-                &opts_cal.model,
-                rows,
-                fit1,
-                nu2,
-                // the caller's count of the calibration's passes replaces it
-                0,
-            );
+            let (face, _device) =
+                calibrate::face(configured, &opts_cal.model, rows, fit1, nu2, cal_passes);
             (nu2, row_noise, face)
         },
         || {
@@ -619,11 +613,11 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
         &spans,
         &fit1,
         &e1,
+        // the calibration's passes: its first fit and the steps it re-simulated
+        1 + if opts_cal.resimulate { cal_steps } else { 0 },
         &mut limits,
     );
     timing.tick("noise_face_and_columns");
-    let mut face = face;
-    face.resimulations = 1 + if opts_cal.resimulate { cal_steps } else { 0 };
     let cfg_model = opts.model.clone();
     let opts = &opts_cal;
     let cols = cols?;
