@@ -55,15 +55,27 @@
 //!   taken with a relative σ of [`BORROW_SIGMA`]). Without a die temperature the sense's
 //!   frequency is the thermometer.
 //!
+//! * **A drift-like alarm.** Without a die temperature a ramp that starts suddenly
+//!   (0 → 33 ppm/s within a sample) builds a lag before its drift stands out, and the
+//!   change detector fires. Its level then crosses the threshold by little (a lag grows
+//!   sample by sample; [`crate::monitor::DRIFT_MARGIN`]), where a jump's crosses by orders
+//!   of magnitude. On a settled estimate, with the drive locked and steady, such an alarm
+//!   raises the drift column's variance alone to `rls.p_reset` (the lag is taken at once,
+//!   the other columns keep what they know) and opens its walk for a window at `vmax`
+//!   ([`DriftTracker::open`]) instead of resetting the axis; the drift's own measure takes
+//!   over within that window. What the column alone does not take up alarms again within
+//!   it and resets the axis. A reset there would bring the next: during a ramp the
+//!   resets come faster than the two quiet windows after each, in which the drift is not
+//!   measured.
+//!
 //! Limits: a device already drifting when the estimate first settles learns that drift as
 //! its wander (it is followed by the forgetting alone, and the detector may fire, until the
 //! drift changes); the drive's θ12 and the sense's θ22 are the only columns that walk (the
-//! damping's temperature coefficient is not tracked); without a die temperature a ramp that
-//! starts suddenly (0 → 33 ppm/s within a sample) before its drift stands out can be read
-//! as a jump, and while the resets come faster than the two quiet windows after each, the
-//! drift is not measured and they go on (`host-sim/scenarios/warm-up-cycle.toml`'s cooling
-//! ramp); with the die temperature its rate opens the walk at once (module
-//! [`crate::thermal`]).
+//! damping's temperature coefficient is not tracked); a drift-like alarm within two quiet
+//! windows of a reset (a re-identification) still resets: opening the walk there slowed
+//! the fault campaign's recoveries (spikes and time jumps 26 % and 11 % recovered in their
+//! slot, `core/docs/design-notes.md`). With the die temperature its rate opens the walk at
+//! once (module [`crate::thermal`]).
 
 use crate::real::Real;
 
@@ -94,6 +106,9 @@ pub struct DriftDesign<T> {
     pub vmax: T,
     /// 4κ², the walk's variance per squared drift (each axis walks every fourth update).
     pub kappa2: T,
+    /// The walk's variance at the fastest drift followed (4κ²·vmax²): a walk a drift-like
+    /// alarm opened ([`DriftTracker::open`]).
+    pub q_open: T,
     /// The slow row filter's group delay at DC, in updates (2ζ/w_f).
     pub lead: T,
 }
@@ -112,6 +127,7 @@ impl<T: Real> DriftDesign<T> {
             min_n: window_samples as u32,
             vmax: T::from_f64(vmax),
             kappa2: T::from_f64(4.0 * kappa * kappa),
+            q_open: T::from_f64(4.0 * kappa * kappa * vmax * vmax),
             lead: T::from_f64(lead_samples),
         }
     }
@@ -142,6 +158,9 @@ pub struct DriftTracker<T> {
     known2: [T; 2],
     /// The sense's [`DriftTracker::lead`] as of its last [`DriftTracker::refresh_lead`].
     lead_sense: T,
+    /// The sample until which a drift-like alarm opened the walk ([`DriftTracker::open`]),
+    /// per axis.
+    open_until: [u64; 2],
 }
 
 impl<T: Real> DriftTracker<T> {
@@ -278,6 +297,33 @@ impl<T: Real> DriftTracker<T> {
         d.kappa2 * (u2 + var)
     }
 
+    /// [`DriftTracker::q`] at sample `k`: at least the fastest drift's walk while a
+    /// drift-like alarm has it open ([`DriftTracker::open`]).
+    #[inline(always)]
+    pub fn q_at(&self, d: &DriftDesign<T>, axis: usize, k: u64) -> T {
+        let q = self.q(d, axis);
+        let open = self.open_until.get(axis).is_some_and(|&until| k < until);
+        if open && q < d.q_open { d.q_open } else { q }
+    }
+
+    /// A drift-like alarm on axis `axis` (the change detector's level crossed its
+    /// threshold by little: a lag that grew, [`crate::monitor::DRIFT_MARGIN`]), on a
+    /// settled estimate that is not already walking so: instead of a covariance reset,
+    /// the drift column walks for a window as fast as the fastest drift the tracker
+    /// follows (`vmax`), while the drift's own measure catches up. A drift's lag is
+    /// absorbed within it and no alarm follows; a jump or a fault is not, and its next
+    /// alarm resets the axis. At sample `k`; false when the walk is already open (that
+    /// next alarm).
+    pub fn open(&mut self, d: &DriftDesign<T>, axis: usize, k: u64) -> bool {
+        match self.open_until.get_mut(axis) {
+            Some(until) if k >= *until => {
+                *until = k + u64::from(d.min_n);
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// Forgets the measured drift (a covariance reset): the re-identification's
     /// corrections are not a drift. Kept: how far the measured drift wanders without one
     /// (a property of the device and its dither, learned before; relearned from a drifting
@@ -286,6 +332,7 @@ impl<T: Real> DriftTracker<T> {
     pub fn clear(&mut self) {
         self.mean = [T::ZERO; 2];
         self.lead_sense = T::ZERO;
+        self.open_until = [0; 2];
     }
 }
 
@@ -417,6 +464,30 @@ mod tests {
             (t.drift(&d, 0), t.drift(&d, 1), t.q(&d, 1)),
             (0.0, 0.0, 0.0)
         );
+    }
+
+    #[test]
+    fn a_drift_like_alarm_opens_the_walk_at_the_fastest_drift_for_a_window() {
+        let d = DriftDesign::<f64>::new(3.0, 500.0, 16.0, 1e-7);
+        let mut t = DriftTracker::default();
+        wander(&mut t, &d, 2000, 0.0);
+        assert_eq!(t.q_at(&d, 1, 2000), 0.0);
+        assert!(t.open(&d, 1, 2000));
+        // already open: the next alarm is the caller's reset
+        assert!(!t.open(&d, 1, 2100));
+        let q_open = 4.0 * 9.0 * 1e-14;
+        assert!((d.q_open - q_open).abs() < 1e-27);
+        assert_eq!((t.q_at(&d, 1, 2000), t.q_at(&d, 0, 2000)), (d.q_open, 0.0));
+        // its own measure of the drift is not touched: no lead from it
+        assert_eq!((t.q(&d, 1), t.lead(&d, 1)), (0.0, 0.0));
+        // a window later it is closed
+        assert_eq!(t.q_at(&d, 1, 2499), d.q_open);
+        assert_eq!(t.q_at(&d, 1, 2500), 0.0);
+        assert!(t.open(&d, 1, 2500));
+        // a reset closes it too
+        t.clear();
+        assert_eq!(t.q_at(&d, 1, 2600), 0.0);
+        assert!(!t.open(&d, 2, 2600));
     }
 
     #[test]

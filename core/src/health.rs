@@ -97,6 +97,9 @@ pub struct Counters {
     pub resets_drive: u32,
     /// Covariance resets of the sense RLS (saturates).
     pub resets_sense: u32,
+    /// Change alarms read as a drift, which opened the drift column's walk instead of a
+    /// covariance reset (`drift`; saturates).
+    pub drift_alarms: u32,
     /// Retunes started (saturates).
     pub retunes: u32,
     /// Retunes aborted because the drive lock was lost (saturates).

@@ -765,6 +765,12 @@ impl<T: Real> RateState<T> {
         core::mem::replace(&mut self.handover, T::ZERO)
     }
 
+    /// The drive is steady: not ringing down ([`DRIVE_RING2`]) and solvable.
+    #[inline(always)]
+    pub fn drive_steady(&self) -> bool {
+        self.started && self.ring_hold == 0
+    }
+
     /// The rate moved less than a gate's length before sample `k` (the slow RLS's rate
     /// walks).
     pub fn moving(&self, k: u64) -> bool {

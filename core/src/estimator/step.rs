@@ -303,13 +303,13 @@ impl<T: Real> State<T> {
             self.drift.push(&f.drift, corr, learn);
         }
         let p = f.p_reset;
-        if self.det1.push(&f.change, k, sum1) {
+        if self.det1.push(&f.change, k, sum1) && !self.walk_instead(f, k, 0) {
             self.rls1.reset_covariance(p);
             self.thermal.jumped(0);
             Counters::bump(&mut self.counters.resets_drive, 1);
             *events |= event::CHANGE_DRIVE;
         }
-        if self.det2.push(&f.change, k, sum2) {
+        if self.det2.push(&f.change, k, sum2) && !self.walk_instead(f, k, 1) {
             self.rls2.reset_covariance(p);
             self.thermal.jumped(1);
             Counters::bump(&mut self.counters.resets_sense, 1);
@@ -362,16 +362,46 @@ impl<T: Real> State<T> {
         if f.drift.enabled() && k & 1 == 0 {
             if k & 2 == 0 {
                 self.rls1
-                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 0), f.p_reset);
+                    .add_walk(DRIFT_COL, self.drift.q_at(&f.drift, 0, k), f.p_reset);
             } else {
                 self.rls2
-                    .add_walk(DRIFT_COL, self.drift.q(&f.drift, 1), f.p_reset);
+                    .add_walk(DRIFT_COL, self.drift.q_at(&f.drift, 1, k), f.p_reset);
             }
         }
         [
             self.rls1.estimate_at(DRIFT_COL),
             self.rls2.estimate_at(DRIFT_COL),
         ]
+    }
+
+    /// An alarm of axis `axis` (0 drive, 1 sense) read as a drift (module `drift`): its
+    /// level crossed the threshold by little ([`crate::monitor::DRIFT_MARGIN`]), the
+    /// estimate has settled since the last reset and that reset is two drift windows
+    /// past, the drive is locked and steady. Instead of a reset of the axis's covariance,
+    /// its drift column's variance alone is raised to `rls.p_reset` (the lag the drift
+    /// built up is taken at once, the other columns keep what they know) and the column
+    /// walks for a window as fast as the fastest drift followed
+    /// ([`crate::drift::DriftTracker::open`]); true if so. The axis's next alarm within
+    /// that window resets it.
+    #[inline(never)]
+    fn walk_instead(&mut self, f: &super::design::Fit<T>, k: u64, axis: usize) -> bool {
+        let det = if axis == 0 { &self.det1 } else { &self.det2 };
+        let drift_like = f.drift.enabled()
+            && det.drift_like(&f.change)
+            && self.bound_learned
+            && k >= self.last_reset + f.drift.quiet
+            && self.health.drive_locked
+            && self.rate.drive_steady();
+        if !(drift_like && self.drift.open(&f.drift, axis, k)) {
+            return false;
+        }
+        if axis == 0 {
+            self.rls1.add_walk(DRIFT_COL, f.p_reset, f.p_reset);
+        } else {
+            self.rls2.add_walk(DRIFT_COL, f.p_reset, f.p_reset);
+        }
+        Counters::bump(&mut self.counters.drift_alarms, 1);
+        true
     }
 
     /// The drift (module `drift`) and the temperature coefficients (module `thermal`) are

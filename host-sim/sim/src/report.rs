@@ -118,7 +118,9 @@ pub fn write_outputs(dir: &Path, result: &RunResult) -> Result<Vec<PathBuf>> {
 /// without a `[temperature]` profile), the drift the core follows on θ12 and θ22,
 /// drift_th12_ppm_s, drift_th22_ppm_s, and the frequency temperature coefficients it has
 /// learned from the samples' temperature, tcf_wx_ppm_k, tcf_wy_ppm_k (ppm/K; NaN until
-/// learned, and without a sensor). `rate_dps_est` is the fast rate.
+/// learned, and without a sensor), then drift_alarms (the change alarms read as a drift so
+/// far, which opened the drift column's walk instead of a reset). `rate_dps_est` is the
+/// fast rate.
 pub fn csv_header() -> Vec<String> {
     let mut h: Vec<String> = ["t_s", "pump_hz", "pump_centre_hz", "pump_scale"]
         .iter()
@@ -153,6 +155,7 @@ pub fn csv_header() -> Vec<String> {
         ]
         .map(String::from),
     );
+    h.push("drift_alarms".into());
     h
 }
 
@@ -216,6 +219,7 @@ fn csv_row(r: &TraceRow, out: &mut String) {
         out.push(',');
         out.push_str(&fmt_f64(x));
     }
+    let _ = write!(out, ",{}", r.drift_alarms);
 }
 
 fn write_csv(path: &Path, rows: &[TraceRow]) -> Result<()> {

@@ -545,6 +545,7 @@ pub fn simulate<T: Real>(
                 temp_c: sc.temp_c(ls.t_s).unwrap_or(f64::NAN),
                 drift_ppm_s: ls.est.drift_ppm_s(),
                 tcf_ppm_k: ls.est.thermal().tcf_ppm_k,
+                drift_alarms: counters.drift_alarms,
             });
             for (bit, what) in EVENT_NAMES {
                 if ls.out.events & bit != 0 {

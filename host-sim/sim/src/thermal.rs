@@ -118,6 +118,28 @@ pub fn reshape_ramp(sc: &mut Scenario, ramp_s: Option<f64>, rise_k: Option<f64>)
     Ok(())
 }
 
+/// Moves a profile of one ramp (as [`reshape_ramp`] takes) to start at `start_s`, its
+/// duration and rise kept, the temperature held before it; the run ends 2 s after it.
+/// Whether a sudden onset sets the change detector off depends on the dithers' phases at
+/// it, so the onset's time is a parameter of a warm-up.
+pub fn move_ramp_start(sc: &mut Scenario, start_s: f64) -> Result<()> {
+    reshape_ramp(sc, None, None)?;
+    let Some(t) = sc.temperature.as_mut() else {
+        bail!("scenario '{}' has no [temperature] profile", sc.name);
+    };
+    let n = t.points.len();
+    let (Some(&[t0, c0]), Some(&[t1, c1])) = (t.points.get(n.wrapping_sub(2)), t.points.last())
+    else {
+        bail!("--start-s needs a profile of one ramp");
+    };
+    if !(start_s.is_finite() && start_s > 0.0) {
+        bail!("--start-s must be > 0 (got {start_s} s)");
+    }
+    t.points = vec![[0.0, c0], [start_s, c0], [start_s + (t1 - t0), c1]];
+    sc.duration_s = start_s + (t1 - t0) + 2.0;
+    Ok(())
+}
+
 /// The lowest ratio of `amp`'s mean over a whole second of `span` (from its first whole
 /// second on) to `oracle`'s mean over the same second; both `(t, value)`. `None` when no
 /// second of the span has both.
@@ -175,6 +197,9 @@ pub struct ThermalReport {
     pub temp_c: (f64, f64),
     /// Covariance resets after start-up ([`STARTUP_S`]).
     pub resets_after_startup: u32,
+    /// Change alarms read as a drift after start-up (the drift column's walk opened
+    /// instead of a reset).
+    pub drift_alarms_after_startup: u32,
     /// Share of the samples with the rate flagged valid: during the change, and from
     /// start-up to the change.
     pub valid_during: f64,
@@ -257,6 +282,13 @@ impl ThermalReport {
         let err = |r: &&TraceRow| r.rate_dps_est - r.rate_dps_true;
         let resets_at = |t: f64| trace.iter().find(|r| r.t_s >= t).map_or(0, |r| r.resets);
         let last = trace.last().map_or(0, |r| r.resets);
+        let alarms_at = |t: f64| {
+            trace
+                .iter()
+                .find(|r| r.t_s >= t)
+                .map_or(0, |r| r.drift_alarms)
+        };
+        let last_alarms = trace.last().map_or(0, |r| r.drift_alarms);
         let wy2_rate = during
             .windows(2)
             .map(|w| {
@@ -301,6 +333,7 @@ impl ThermalReport {
             change_s: (t0, t1),
             temp_c: (tp.temp_c(t0), tp.temp_c(t1)),
             resets_after_startup: last - resets_at(STARTUP_S),
+            drift_alarms_after_startup: last_alarms - alarms_at(STARTUP_S),
             valid_during: share(&during),
             valid_before: share(&before),
             rate_err_rms_before_dps: rms(before.iter().map(err)),
@@ -371,6 +404,10 @@ impl ThermalReport {
             (
                 "covariance resets after start-up",
                 format!("{}", self.resets_after_startup),
+            ),
+            (
+                "change alarms read as a drift after start-up (the walk opened, no reset)",
+                format!("{}", self.drift_alarms_after_startup),
             ),
             (
                 "rate valid: before the change / during it",
@@ -565,6 +602,14 @@ mod tests {
         let mut sc = warm();
         sc.temperature.as_mut().unwrap().points.push([40.0, 25.0]);
         assert!(reshape_ramp(&mut sc, Some(300.0), None).is_err());
+        assert!(move_ramp_start(&mut sc, 10.0).is_err());
         assert!(reshape_ramp(&mut warm(), Some(0.0), None).is_err());
+        // the onset moved: the ramp's length and rise kept, held before it
+        let mut sc = warm();
+        move_ramp_start(&mut sc, 30.4).unwrap();
+        let t = sc.temperature.as_ref().unwrap();
+        assert_eq!(t.points, vec![[0.0, 25.0], [30.4, 25.0], [50.4, 35.0]]);
+        assert_eq!(sc.duration_s, 52.4);
+        assert!(move_ramp_start(&mut warm(), f64::NAN).is_err());
     }
 }

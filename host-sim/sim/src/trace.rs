@@ -107,6 +107,9 @@ pub struct TraceRow {
     /// The frequency temperature coefficients the core has learned, drive and sense,
     /// ppm/K (`Estimator::thermal`; NaN until learned).
     pub tcf_ppm_k: [f64; 2],
+    /// Cumulative count of change alarms read as a drift (the drift column's walk opened
+    /// instead of a covariance reset; `Counters::drift_alarms`).
+    pub drift_alarms: u32,
 }
 
 /// Something that happened during a run (change detected, retune started, ...).

@@ -9,7 +9,9 @@ use super::{
 };
 use paragyro_simulator::runner::RunOptions;
 use paragyro_simulator::scenario::Scenario;
-use paragyro_simulator::thermal::{ThermalReport, oracle_sense_amp, reshape_ramp, set_tcf_ppm_k};
+use paragyro_simulator::thermal::{
+    ThermalReport, move_ramp_start, oracle_sense_amp, reshape_ramp, set_tcf_ppm_k,
+};
 
 /// `host-sim/scenarios/warm-up.toml`, the default.
 const WARM_UP: &str = include_str!("../../../scenarios/warm-up.toml");
@@ -56,6 +58,11 @@ pub struct Args {
     /// The ramp's rise instead of the profile's, K (a profile of one ramp).
     #[arg(long, value_name = "K")]
     pub rise_k: Option<f64>,
+    /// Start the ramp at this time, s, its length and rise kept (a profile of one ramp;
+    /// whether a sudden onset sets the change detector off depends on the dithers' phases
+    /// at it).
+    #[arg(long, value_name = "S")]
+    pub start_s: Option<f64>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -90,6 +97,12 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     }
     if a.ramp_s.is_some() || a.rise_k.is_some() {
         reshape_ramp(&mut sc, a.ramp_s, a.rise_k).map_err(|error| Failure {
+            code: EXIT_LOAD,
+            error,
+        })?;
+    }
+    if let Some(t0) = a.start_s {
+        move_ramp_start(&mut sc, t0).map_err(|error| Failure {
             code: EXIT_LOAD,
             error,
         })?;

@@ -111,6 +111,9 @@ pub struct ClassReport {
     pub bad_samples: u32,
     /// Covariance resets by the change detector (drive + sense).
     pub resets: u32,
+    /// Change alarms read as a drift (the drift column re-opened instead of a reset;
+    /// `Counters::drift_alarms`).
+    pub drift_alarms: u32,
 }
 
 /// `faults.json`: the campaign's settings and one entry per class.
@@ -265,6 +268,7 @@ pub fn run_class(
         rate_err_dps_after_p95: quantile(&mut rate, 0.95),
         bad_samples: counters.bad_samples,
         resets: counters.resets_drive.saturating_add(counters.resets_sense),
+        drift_alarms: counters.drift_alarms,
     })
 }
 

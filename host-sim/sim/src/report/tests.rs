@@ -47,6 +47,7 @@ fn synthetic_row(k: usize, twin: bool) -> TraceRow {
         temp_c: 25.0 + 0.01 * k as f64,
         drift_ppm_s: [0.5 * k as f64, -2.0],
         tcf_ppm_k: [-30.0 + k as f64, f64::NAN],
+        drift_alarms: (k / 300) as u32,
     };
     row.phys_est = row
         .phys_true
@@ -219,7 +220,7 @@ fn writes_all_outputs_and_the_csv_parses_back() {
     let csv = fs::read_to_string(dir.join("trace.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let ncol = 4 + 2 * 14 + 2 * 12 + 4 + HEALTH_NAMES.len() + 2 + 3 + 5;
+    let ncol = 4 + 2 * 14 + 2 * 12 + 4 + HEALTH_NAMES.len() + 2 + 3 + 5 + 1;
     assert_eq!(header.len(), ncol);
     assert_eq!(header, csv_header());
     assert_eq!(header[0], "t_s");
@@ -227,10 +228,11 @@ fn writes_all_outputs_and_the_csv_parses_back() {
     assert_eq!(header[18], "th11_est");
     assert_eq!(header[32], "mu_x_true");
     assert_eq!(header[44], "mu_x_est");
-    assert_eq!(header[ncol - 9], "bad_samples");
-    assert_eq!(header[ncol - 6], "rate_valid");
-    assert_eq!(header[ncol - 5], "temp_c");
-    assert_eq!(header[ncol - 1], "tcf_wy_ppm_k");
+    assert_eq!(header[ncol - 10], "bad_samples");
+    assert_eq!(header[ncol - 7], "rate_valid");
+    assert_eq!(header[ncol - 6], "temp_c");
+    assert_eq!(header[ncol - 2], "tcf_wy_ppm_k");
+    assert_eq!(header[ncol - 1], "drift_alarms");
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), result.trace.len());
     for (line, r) in rows.iter().zip(&result.trace) {
@@ -257,16 +259,17 @@ fn writes_all_outputs_and_the_csv_parses_back() {
             let want = if r.health >> bit & 1 == 1 { "1" } else { "0" };
             assert_eq!(f[60 + bit], want);
         }
-        assert_eq!(f[ncol - 10].parse::<u32>().unwrap(), r.resets);
-        assert_eq!(f[ncol - 9].parse::<u32>().unwrap(), r.bad_samples);
-        assert!(same(parse_field(f[ncol - 8]), r.rate_dps_slow));
-        assert!(same(parse_field(f[ncol - 7]), r.quadrature_dps));
-        assert_eq!(f[ncol - 6], if r.rate_valid { "1" } else { "0" });
-        assert!(same(parse_field(f[ncol - 5]), r.temp_c));
-        assert!(same(parse_field(f[ncol - 4]), r.drift_ppm_s[0]));
-        assert!(same(parse_field(f[ncol - 3]), r.drift_ppm_s[1]));
-        assert!(same(parse_field(f[ncol - 2]), r.tcf_ppm_k[0]));
-        assert!(same(parse_field(f[ncol - 1]), r.tcf_ppm_k[1]));
+        assert_eq!(f[ncol - 11].parse::<u32>().unwrap(), r.resets);
+        assert_eq!(f[ncol - 10].parse::<u32>().unwrap(), r.bad_samples);
+        assert!(same(parse_field(f[ncol - 9]), r.rate_dps_slow));
+        assert!(same(parse_field(f[ncol - 8]), r.quadrature_dps));
+        assert_eq!(f[ncol - 7], if r.rate_valid { "1" } else { "0" });
+        assert!(same(parse_field(f[ncol - 6]), r.temp_c));
+        assert!(same(parse_field(f[ncol - 5]), r.drift_ppm_s[0]));
+        assert!(same(parse_field(f[ncol - 4]), r.drift_ppm_s[1]));
+        assert!(same(parse_field(f[ncol - 3]), r.tcf_ppm_k[0]));
+        assert!(same(parse_field(f[ncol - 2]), r.tcf_ppm_k[1]));
+        assert_eq!(f[ncol - 1].parse::<u32>().unwrap(), r.drift_alarms);
     }
 
     // The PNGs are real images of some size.

@@ -476,6 +476,7 @@ fn measure_values_average_the_sense_amplitude() {
         temp_c: f64::NAN,
         drift_ppm_s: [0.0; 2],
         tcf_ppm_k: [f64::NAN; 2],
+        drift_alarms: 0,
     };
     let main: Vec<TraceRow> = (0..1000).map(|k| row(k as f64 * 0.002, 1.5)).collect();
     let twin: Vec<TraceRow> = (0..1000).map(|k| row(k as f64 * 0.002, 0.75)).collect();
