@@ -109,6 +109,11 @@ pub struct MonitorConfig {
     pub change_alpha: f64,
     /// Minimum time between two covariance resets on one axis, s.
     pub change_hold_s: f64,
+    /// An alarm whose level crosses `change_threshold` by at most this factor reads as a
+    /// drift's lag on a settled estimate: the drift column alone is re-opened instead of
+    /// a reset (`monitor::DRIFT_MARGIN`, 25, and why; `drift`, "A drift-like alarm"). 0:
+    /// every alarm resets its axis.
+    pub change_drift_margin: f64,
     /// Lock-in full scale: a channel at or beyond ±this is saturated, µm.
     pub full_scale_um: f64,
     /// Accelerometer full scale, m/s².
@@ -280,6 +285,7 @@ const TABLE2_CONFIG: Config = Config {
         change_threshold: 1e3,
         change_alpha: 0.05,
         change_hold_s: 0.05,
+        change_drift_margin: crate::monitor::DRIFT_MARGIN,
         full_scale_um: 20.0,
         accel_full_scale_mps2: 400.0,
         stuck_samples: 50,
@@ -528,6 +534,7 @@ impl MonitorConfig {
             return Err(E::new("monitor.change_alpha", "must be in (0, 1]"));
         }
         nonneg(m.change_hold_s, "monitor.change_hold_s")?;
+        nonneg(m.change_drift_margin, "monitor.change_drift_margin")?;
         pos(m.full_scale_um, "monitor.full_scale_um")?;
         pos(m.accel_full_scale_mps2, "monitor.accel_full_scale_mps2")?;
         nonneg(m.excitation_min_fraction, "monitor.excitation_min_fraction")

@@ -161,7 +161,8 @@ pub struct ChangeDesign<T> {
     nominal: T,
     alpha: T,
     threshold: T,
-    /// [`DRIFT_MARGIN`] times `threshold`.
+    /// The drift-like margin (`monitor.change_drift_margin`, [`DRIFT_MARGIN`] by default)
+    /// times `threshold`.
     drift_level: T,
     hold: u64,
 }
@@ -183,13 +184,14 @@ pub struct ChangeDesign<T> {
 pub const DRIFT_MARGIN: f64 = 25.0;
 
 impl<T: Real> ChangeDesign<T> {
-    /// `nominal` level (number of rows), EWMA weight, threshold, hold (samples).
-    pub fn new(nominal: f64, alpha: f64, threshold: f64, hold: u64) -> Self {
+    /// `nominal` level (number of rows), EWMA weight, threshold, the drift-like margin
+    /// ([`DRIFT_MARGIN`] by default; 0: no alarm is drift-like), hold (samples).
+    pub fn new(nominal: f64, alpha: f64, threshold: f64, drift_margin: f64, hold: u64) -> Self {
         ChangeDesign {
             nominal: T::from_f64(nominal),
             alpha: T::from_f64(alpha),
             threshold: T::from_f64(threshold),
-            drift_level: T::from_f64(threshold * DRIFT_MARGIN),
+            drift_level: T::from_f64(threshold * drift_margin),
             hold,
         }
     }
@@ -533,7 +535,7 @@ mod tests {
     #[test]
     fn change_detector_quiet_on_noise_fires_on_step() {
         let mut s = 7u64;
-        let dd = ChangeDesign::<f64>::new(5.0, 0.05, 1e3, 25);
+        let dd = ChangeDesign::<f64>::new(5.0, 0.05, 1e3, DRIFT_MARGIN, 25);
         let mut d = ChangeDetector::new(&dd);
         for k in 0..100_000u64 {
             assert!(!d.push(&dd, k, noise_sum(&mut s)), "false alarm at {k}");
@@ -552,7 +554,7 @@ mod tests {
 
     #[test]
     fn a_lag_that_grows_reads_as_a_drift_a_jump_does_not() {
-        let dd = ChangeDesign::<f64>::new(12.0, 0.05, 1e3, 25);
+        let dd = ChangeDesign::<f64>::new(12.0, 0.05, 1e3, DRIFT_MARGIN, 25);
         // a drift's lag: the innovations grow sample by sample and the level crosses the
         // threshold by a little
         let mut d = ChangeDetector::new(&dd);
@@ -568,6 +570,11 @@ mod tests {
         let fired = (2..10_000u64).find(|&k| d.push(&dd, k, 12.0 + 0.5 * k as f64));
         assert!(fired.is_some_and(|k| k >= 27), "{fired:?}: within the hold");
         assert!(d.drift_like(&dd));
+        // with a margin of 0 no alarm is drift-like (`monitor.change_drift_margin`)
+        let d0 = ChangeDesign::<f64>::new(12.0, 0.05, 1e3, 0.0, 25);
+        let mut d = ChangeDetector::new(&d0);
+        assert!((0..10_000u64).any(|k| d.push(&d0, k, 12.0 + 0.5 * k as f64)));
+        assert!(!d.drift_like(&d0));
     }
 
     #[test]

@@ -359,7 +359,7 @@ fn assert_warm_up_targets(w: &paragyro_fil::verdict::WarmUpNumbers) {
 /// within the tick budget (mean 12 000, max 15 000 instructions, exact). Measured (seed 1,
 /// `summary.json`): 0 resets, the rate valid on 99.9 % of the ramp, its error 1.03× its rms
 /// before the ramp (the host-only loop 1.17×), the sense amplitude 100.2 % of the oracle's;
-/// ticks mean 11 812, max 14 263. The dither runs throughout, so every tick updates both
+/// ticks mean 11 811, max 14 262. The dither runs throughout, so every tick updates both
 /// RLS and writes both pump steps to the DDS, one SPI frame each
 /// (`firmware/scripts/fil-profile.sh warm-up`); `fw-drift-retune`, whose mean the README's
 /// budget row quotes, stops its dither for its last 4 of 10 s.

@@ -95,6 +95,9 @@ const FIELDS: &[(&str, Rule, Setter)] = &[
     ("monitor.change_hold_s", Rule::NonNeg, |c, v| {
         c.monitor.change_hold_s = v
     }),
+    ("monitor.change_drift_margin", Rule::NonNeg, |c, v| {
+        c.monitor.change_drift_margin = v
+    }),
     ("monitor.full_scale_um", Rule::Pos, |c, v| {
         c.monitor.full_scale_um = v
     }),
