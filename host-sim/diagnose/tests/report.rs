@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
-use paragyro_diagnose::diagnose::confirm::{Run, Stop};
+use paragyro_diagnose::diagnose::confirm::{Pair, Run, Stop};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
 use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT, Limitation};
 use paragyro_diagnose::diagnose::{
@@ -150,6 +150,13 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
             Just(Stop::Failed)
         ]),
         prop::option::of(num()),
+        prop::option::of(("[a-z_]{3,20}=[0-9.e-]{1,8}", num(), num()).prop_map(
+            |(effect, unexplained, residual_over_noise)| Pair {
+                effect,
+                unexplained,
+                residual_over_noise,
+            },
+        )),
     )
         .prop_map(
             |(
@@ -162,6 +169,7 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                 runs,
                 stopped,
                 next_step,
+                with,
             )| {
                 Confirmation {
                     effect,
@@ -181,6 +189,7 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                         .collect(),
                     stopped,
                     next_step,
+                    with,
                 }
             },
         )

@@ -29,6 +29,12 @@
 //! judgement as it was: blind-benchmark.md). The budget ([`CONFIRM_RUNS`] by default)
 //! bounds the diagnosis's time: each candidate is given its first run, and the steps of
 //! the first ones take what the later ones leave.
+//!
+//! **Two effects at once** ([`partner`]): a candidate whose last run fails the rules but
+//! closes part of the gap is tried with each other library effect fitted with the 14 θ
+//! about that run, and the pair judged by the same rules ([`Confirmation::with`]). A pair
+//! that passes is the verdict only when no candidate passes alone; it adds no run of the
+//! record.
 
 use serde::{Deserialize, Serialize};
 
@@ -43,13 +49,13 @@ use super::report::Candidate;
 use super::report::Limitation;
 use super::resim;
 use super::rows::{Rows, Spans};
-use super::verdict::{Answer, Decision, Verdict};
+use super::verdict::{Answer, Decision, Secondary, Verdict};
 use super::{
     NOISE_ROW_ENERGY, NOISE_ROW_PROFILE, NOISE_ROW_SCATTER, NONE_NOISE_MAX, NR, Options,
     ROW_GAP_MIN, ROW_GAP_SHARE, ROW_SCATTER_SIGMAS, ROW_UNEXPLAINED_MAX, SHARE_MIN, T_SIG, Timing,
     UNEXPLAINED_MAX,
 };
-use paragyro_simulator::effects::Effect;
+use paragyro_simulator::effects::{Effect, EffectSpec, Signature};
 
 /// The re-simulation test of one candidate (an entry of report.json's `confirmation`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -79,6 +85,23 @@ pub struct Confirmation {
     /// or on the budget.
     #[serde(default)]
     pub next_step: Option<f64>,
+    /// A second library effect that, fitted with the 14 θ about the last run, brings the
+    /// pair through the two rules where the run alone failed them ([`partner`]); the
+    /// fields above judge the candidate alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub with: Option<Pair>,
+}
+
+/// The second effect of a pair that passed the two rules ([`Confirmation::with`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pair {
+    /// The second effect at its size fitted about the candidate's last run
+    /// (`NAME=SIZE[@PARAM]`).
+    pub effect: String,
+    /// Share of the held-out gap above the noise the pair leaves unexplained.
+    pub unexplained: f64,
+    /// Held-out residual per row after the pair, × the record's noise.
+    pub residual_over_noise: f64,
 }
 
 /// Why a candidate's Gauss–Newton steps ended.
@@ -218,6 +241,9 @@ pub(crate) fn confirm(
     }
     let picks = picks(inp, ranking);
     let mut tests = Vec::new();
+    // the first pair that passed (a candidate's run with a second effect fitted about it),
+    // the verdict only when no candidate passes alone
+    let mut pair: Option<(Effect, Effect, f64, f64)> = None;
     let mut left = inp.opts.confirm_runs;
     for (i, &(effect, first)) in picks.iter().enumerate() {
         if left == 0 {
@@ -232,7 +258,11 @@ pub(crate) fn confirm(
             0
         };
         let steps = left.saturating_sub(1 + kept);
-        let (t, fit_e) = match test_one(inp, effect, steps, timing, limits) {
+        let Tested {
+            conf: t,
+            fit_e,
+            second,
+        } = match test_one(inp, effect, ranking, steps, timing, limits) {
             Ok(r) => r,
             Err(e) => {
                 limits.push(Limitation::new(
@@ -246,28 +276,61 @@ pub(crate) fn confirm(
         left = left.saturating_sub(t.runs.len());
         let confirmed = t.confirmed;
         let unexplained = t.unexplained;
+        let pair_left = t.with.as_ref().map(|w| w.unexplained);
         tests.push(t);
-        if confirmed {
-            let verdict_cols = inp.cols.of(effect);
-            return (
+        match (second, pair_left) {
+            _ if confirmed => {
+                let verdict_cols = inp.cols.of(effect);
+                return (
+                    Decision {
+                        verdict: Verdict::Effects {
+                            primary: effect,
+                            secondary: None,
+                        },
+                        closest: Answer::Effect(effect),
+                        verdict_cols,
+                        gap_after: (fit_e.e_hold - inp.fits.e_floor).max(0.0),
+                        after_fit: fit_e,
+                        unexplained,
+                        unexplained_rows: Vec::new(),
+                        ..decision
+                    },
+                    tests,
+                );
+            }
+            (Some((e2, added)), Some(left_by_pair)) if pair.is_none() => {
+                pair = Some((effect, e2, added, left_by_pair));
+            }
+            _ => {}
+        }
+    }
+    match pair {
+        Some((e1, e2, added, unexplained)) => {
+            let verdict_cols: Vec<usize> =
+                inp.cols.of(e1).into_iter().chain(inp.cols.of(e2)).collect();
+            let after_fit = inp.fits.bank.fit(&inp.cols.with(&verdict_cols));
+            (
                 Decision {
                     verdict: Verdict::Effects {
-                        primary: effect,
-                        secondary: None,
+                        primary: e1,
+                        secondary: Some(Secondary {
+                            effect: e2,
+                            added_closure: added,
+                        }),
                     },
-                    closest: Answer::Effect(effect),
+                    closest: Answer::Effect(e1),
                     verdict_cols,
-                    gap_after: (fit_e.e_hold - inp.fits.e_floor).max(0.0),
-                    after_fit: fit_e,
+                    gap_after: (after_fit.e_hold - inp.fits.e_floor).max(0.0),
+                    after_fit,
                     unexplained,
                     unexplained_rows: Vec::new(),
                     ..decision
                 },
                 tests,
-            );
+            )
         }
+        None => (decision, tests),
     }
-    (decision, tests)
 }
 
 /// The candidates [`confirm`] re-simulates, in order: the significant ones that close at
@@ -463,10 +526,11 @@ pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {
 fn test_one(
     inp: &Inputs<'_>,
     effect: Effect,
+    ranking: &[Candidate],
     steps: usize,
     timing: &mut Timing,
     limits: &mut Vec<Limitation>,
-) -> anyhow::Result<(Confirmation, super::lsq::Fit)> {
+) -> anyhow::Result<Tested> {
     let Inputs {
         rec,
         opts,
@@ -583,6 +647,25 @@ fn test_one(
         j = jn;
         runs.push(Run::of(specs[0].size, &j));
     };
+    timing.tick("confirm_by_resimulation");
+    // the run alone failed the rules: a second effect fitted about it
+    let paired = if j.confirmed || stopped == Stop::Hopeless {
+        None
+    } else {
+        partner(inp, effect, ranking, &opts_e, &rows_e, &j, limits)
+    };
+    timing.tick("confirm_pair");
+    let (with, second) = match paired {
+        Some(p) => (
+            Some(Pair {
+                effect: p.spec.to_string(),
+                unexplained: p.judged.unexplained,
+                residual_over_noise: p.judged.residual_over_noise,
+            }),
+            Some((p.effect, j.unexplained - p.judged.unexplained)),
+        ),
+        None => (None, None),
+    };
     let Judged {
         unexplained,
         unexplained_rows,
@@ -590,9 +673,8 @@ fn test_one(
         nu2_e,
         confirmed,
     } = j;
-    timing.tick("confirm_by_resimulation");
-    Ok((
-        Confirmation {
+    Ok(Tested {
+        conf: Confirmation {
             effect: specs[0].to_string(),
             unexplained,
             unexplained_rows,
@@ -602,9 +684,106 @@ fn test_one(
             runs,
             stopped: Some(stopped),
             next_step,
+            with,
         },
         fit_e,
-    ))
+        second,
+    })
+}
+
+/// A candidate's test ([`test_one`]).
+struct Tested {
+    conf: Confirmation,
+    /// The bank's fit with the candidate's columns.
+    fit_e: Fit,
+    /// The second effect of a pair that passed, and the share of the gap above the noise
+    /// it adds to the run alone.
+    second: Option<(Effect, f64)>,
+}
+
+/// A second effect that passes the two rules with a candidate's run ([`partner`]).
+struct Paired {
+    effect: Effect,
+    spec: EffectSpec,
+    judged: Judged,
+}
+
+/// Two effects at once: the second library effect of a pair, when a candidate's last run
+/// `rows_e` fails the two rules alone but closes part of the gap (it leaves less than
+/// [`HOPELESS_UNEXPLAINED`] of it). Each other testable library effect of the ranking is
+/// fitted with the 14 θ on the gap that run leaves (its columns about the run; the angular
+/// vibration's about the calibrated model, at the beat scanned there) and kept when its
+/// size is significant (|size|/σ ≥ [`T_SIG`], its first column's) and the pair passes the
+/// same two rules against the run's noise; of those, the one leaving the least of the gap.
+/// The first effect carries the re-simulation (large, nonlinear), the second is linear
+/// about it: no run of the record is added. An effect whose columns about the run cannot
+/// be built is skipped with a limitation.
+fn partner(
+    inp: &Inputs<'_>,
+    first: Effect,
+    ranking: &[Candidate],
+    opts_e: &Options,
+    rows_e: &Rows,
+    alone: &Judged,
+    limits: &mut Vec<Limitation>,
+) -> Option<Paired> {
+    if alone.unexplained.is_nan() || alone.unexplained >= HOPELESS_UNEXPLAINED {
+        return None;
+    }
+    let usable = both_usable(inp.rows, rows_e);
+    let mut best: Option<Paired> = None;
+    let others = ranking
+        .iter()
+        .filter(|c| c.effect != first && c.untestable.is_none())
+        .filter(|c| !inp.cols.of(c.effect).is_empty());
+    for c in others {
+        let e2 = c.effect;
+        let ecols = if e2.signature() == Some(Signature::Vibration) {
+            inp.cols
+                .of(e2)
+                .into_iter()
+                .map(|i| inp.cols.cols[i].clone())
+                .collect()
+        } else {
+            match super::columns::effect_columns(e2, inp.rec, opts_e, rows_e, inp.spans) {
+                Ok(v) => v,
+                Err(e) => {
+                    limits.push(Limitation::new(
+                        "confirmation",
+                        format!("{e2} as a second effect beside {first}: its columns about the run ({e:#}); not tested"),
+                    ));
+                    continue;
+                }
+            }
+        };
+        if ecols.is_empty() {
+            continue;
+        }
+        let (f, e_c) = refit(rows_e, &usable, inp.spans, &ecols);
+        let n = ecols.len();
+        let (Some(betas), Some(&sd)) = (f.beta.get(14..14 + n), f.sigma.get(14)) else {
+            continue;
+        };
+        if !(sd > 0.0 && betas[0].abs() / sd >= T_SIG) {
+            continue;
+        }
+        let Ok((spec, _)) = super::howfar::spec_of(e2, betas, inp.cols.beat, inp.rows.gpd) else {
+            continue;
+        };
+        let judged = rules(inp, &e_c, alone.nu2_e);
+        if judged.confirmed
+            && best
+                .as_ref()
+                .is_none_or(|b| judged.unexplained < b.judged.unexplained)
+        {
+            best = Some(Paired {
+                effect: e2,
+                spec,
+                judged,
+            });
+        }
+    }
+    best
 }
 
 #[cfg(test)]

@@ -108,46 +108,61 @@ pub(crate) fn specs_of(cols: &Columns, gpd: f64, effects: &[Effect], f: &Fit) ->
             ));
             continue;
         };
-        let (spec, phase) = if effect.signature() == Some(Signature::Vibration) {
-            match betas[..] {
-                [gr, gi] => (
-                    EffectSpec {
-                        effect,
-                        size: gr.hypot(gi) / gpd,
-                        param: Some(cols.beat),
-                    },
-                    Some(gi.atan2(gr)),
-                ),
-                _ => {
-                    out.skipped.push(format!(
-                        "{effect}: {} of its 2 columns on this record",
-                        betas.len()
-                    ));
-                    continue;
-                }
+        let (spec, phase) = match spec_of(effect, &betas, cols.beat, gpd) {
+            Ok(v) => v,
+            Err(why) => {
+                out.skipped.push(format!("{effect}: {why}"));
+                continue;
             }
-        } else {
-            (
-                EffectSpec {
-                    effect,
-                    size: betas[0],
-                    // the structural face tests the softening driven by the pump
-                    param: (effect == Effect::ElectrostaticSoftening).then_some(1.0),
-                },
-                None,
-            )
         };
-        if !spec.size.is_finite() || phase.is_some_and(|p| !p.is_finite()) {
-            out.skipped
-                .push(format!("{effect}: its fitted size is not finite"));
-            continue;
-        }
         if let Some(p) = phase {
             out.vib_phase = p;
         }
         out.specs.push(spec);
     }
     out
+}
+
+/// `effect` at the size its fitted coefficients `betas` give (its columns' order), with the
+/// angular vibration's phase: the vibration's γ over `gpd` (γ per °/s) at the scanned
+/// `beat`, the softening driven by the pump. Why not, when the coefficients are not the
+/// effect's or its size is not finite.
+pub(crate) fn spec_of(
+    effect: Effect,
+    betas: &[f64],
+    beat: f64,
+    gpd: f64,
+) -> Result<(EffectSpec, Option<f64>), String> {
+    let (spec, phase) = if effect.signature() == Some(Signature::Vibration) {
+        match betas {
+            &[gr, gi] => (
+                EffectSpec {
+                    effect,
+                    size: gr.hypot(gi) / gpd,
+                    param: Some(beat),
+                },
+                Some(gi.atan2(gr)),
+            ),
+            _ => return Err(format!("{} of its 2 columns on this record", betas.len())),
+        }
+    } else {
+        let Some(&size) = betas.first() else {
+            return Err("no column of its own on this record".into());
+        };
+        (
+            EffectSpec {
+                effect,
+                size,
+                // the structural face tests the softening driven by the pump
+                param: (effect == Effect::ElectrostaticSoftening).then_some(1.0),
+            },
+            None,
+        )
+    };
+    if !spec.size.is_finite() || phase.is_some_and(|p| !p.is_finite()) {
+        return Err("its fitted size is not finite".into());
+    }
+    Ok((spec, phase))
 }
 
 /// Re-runs the simulator with the verdict's effect(s) on the held-out span: the calibrated

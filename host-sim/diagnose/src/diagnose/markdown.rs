@@ -71,6 +71,15 @@ fn confirmation(s: &mut String, r: &Report) {
             stop_text(c),
             if c.confirmed { "yes" } else { "no" }
         ));
+        if let Some(w) = &c.with {
+            s.push_str(&format!(
+                "| `{}` + `{}` (fitted about its run) | {:.1} % | – | {} | – | – | as a pair |\n",
+                c.effect,
+                w.effect,
+                100.0 * w.unexplained,
+                g4(w.residual_over_noise)
+            ));
+        }
     }
 }
 
