@@ -756,7 +756,8 @@ fn partner(
                 }
             }
         };
-        if ecols.is_empty() {
+        // (the calibrated model's columns span the run's samples: the same record)
+        if ecols.is_empty() || ecols.iter().any(|c| c.v.len() != rows_e.y.len()) {
             continue;
         }
         let (f, e_c) = refit(rows_e, &usable, inp.spans, &ecols);
