@@ -30,7 +30,7 @@
 //! bounds the diagnosis's time: each candidate is given its first run, and the steps of
 //! the first ones take what the later ones leave.
 //!
-//! **Two effects at once** ([`partner`]): a candidate whose last run fails the rules but
+//! **Two effects at once** (`partner`): a candidate whose last run fails the rules but
 //! closes part of the gap is tried with each other library effect fitted with the 14 θ
 //! about that run, and the pair judged by the same rules ([`Confirmation::with`]). A pair
 //! that passes is the verdict only when no candidate passes alone; it adds no run of the
@@ -86,7 +86,7 @@ pub struct Confirmation {
     #[serde(default)]
     pub next_step: Option<f64>,
     /// A second library effect that, fitted with the 14 θ about the last run, brings the
-    /// pair through the two rules where the run alone failed them ([`partner`]); the
+    /// pair through the two rules where the run alone failed them (`partner`); the
     /// fields above judge the candidate alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub with: Option<Pair>,
@@ -701,7 +701,7 @@ struct Tested {
     second: Option<(Effect, f64)>,
 }
 
-/// A second effect that passes the two rules with a candidate's run ([`partner`]).
+/// A second effect that passes the two rules with a candidate's run (`partner`).
 struct Paired {
     effect: Effect,
     spec: EffectSpec,
