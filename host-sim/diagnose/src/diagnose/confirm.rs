@@ -517,32 +517,23 @@ pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {
     !passed && unexplained > HOPELESS_UNEXPLAINED && size * (size + delta) < 0.0
 }
 
-/// One candidate re-simulated and tested (module docs), with at most `steps` Gauss–Newton
-/// steps (each a run of the record). The steps: the effect's run, the 14 θ and its size
-/// refitted on the gap it leaves, the run repeated. A large effect's linear fit about the
-/// calibrated model is close in size but leaves the θ it moved off (a thermal drift at 45×
-/// its limit, its size within 0.4 %, left 6.6e8 of row energy; one
-/// step brings it to 4.5e4).
-fn test_one(
+/// Where a candidate's runs start: the bank's fit with its columns, the effect at its
+/// fitted size (with the vibration's phase), and the options whose model is the calibrated
+/// one refitted jointly with it. An error when the effect cannot be sized or that model is
+/// not physical.
+fn joint_start(
     inp: &Inputs<'_>,
     effect: Effect,
-    ranking: &[Candidate],
-    steps: usize,
-    timing: &mut Timing,
-    limits: &mut Vec<Limitation>,
-) -> anyhow::Result<Tested> {
+) -> anyhow::Result<(Fit, Vec<EffectSpec>, f64, Options)> {
     let Inputs {
-        rec,
         opts,
         rows,
-        spans,
         cols,
         fits,
         fit1,
         ..
     } = *inp;
-    let ec = cols.of(effect);
-    let fit_e = fits.bank.fit(&cols.with(&ec));
+    let fit_e = fits.bank.fit(&cols.with(&cols.of(effect)));
     let Specs {
         specs,
         vib_phase,
@@ -563,6 +554,31 @@ fn test_one(
         model,
         ..opts.clone()
     };
+    Ok((fit_e, specs, vib_phase, opts_e))
+}
+
+/// One candidate re-simulated and tested (module docs), with at most `steps` Gauss–Newton
+/// steps (each a run of the record). The steps: the effect's run, the 14 θ and its size
+/// refitted on the gap it leaves, the run repeated. A large effect's linear fit about the
+/// calibrated model is close in size but leaves the θ it moved off (a thermal drift at 45×
+/// its limit, its size within 0.4 %, left 6.6e8 of row energy; one
+/// step brings it to 4.5e4).
+fn test_one(
+    inp: &Inputs<'_>,
+    effect: Effect,
+    ranking: &[Candidate],
+    steps: usize,
+    timing: &mut Timing,
+    limits: &mut Vec<Limitation>,
+) -> anyhow::Result<Tested> {
+    let Inputs {
+        rec,
+        opts,
+        rows,
+        spans,
+        ..
+    } = *inp;
+    let (fit_e, specs, vib_phase, opts_e) = joint_start(inp, effect)?;
     let mut rows_e = Rows::build_with(rec, &opts_e, &specs, vib_phase, timing)?;
     // Gauss–Newton steps on the effect's run: the 14 θ and the effect's size refitted on
     // the gap it leaves (the effect's columns about that run), the simulator re-run; each
