@@ -243,7 +243,7 @@ pub(crate) fn confirm(
     let mut tests = Vec::new();
     // the first pair that passed (a candidate's run with a second effect fitted about it),
     // the verdict only when no candidate passes alone
-    let mut pair: Option<(Effect, Effect, f64, f64)> = None;
+    let mut pair: Option<(Effect, Second)> = None;
     let mut left = inp.opts.confirm_runs;
     for (i, &(effect, first)) in picks.iter().enumerate() {
         if left == 0 {
@@ -274,62 +274,62 @@ pub(crate) fn confirm(
             }
         };
         left = left.saturating_sub(t.runs.len());
-        let confirmed = t.confirmed;
-        let unexplained = t.unexplained;
-        let pair_left = t.with.as_ref().map(|w| w.unexplained);
+        let (confirmed, unexplained) = (t.confirmed, t.unexplained);
         tests.push(t);
-        match (second, pair_left) {
-            _ if confirmed => {
-                let verdict_cols = inp.cols.of(effect);
-                return (
-                    Decision {
-                        verdict: Verdict::Effects {
-                            primary: effect,
-                            secondary: None,
-                        },
-                        closest: Answer::Effect(effect),
-                        verdict_cols,
-                        gap_after: (fit_e.e_hold - inp.fits.e_floor).max(0.0),
-                        after_fit: fit_e,
-                        unexplained,
-                        unexplained_rows: Vec::new(),
-                        ..decision
-                    },
-                    tests,
-                );
-            }
-            (Some((e2, added)), Some(left_by_pair)) if pair.is_none() => {
-                pair = Some((effect, e2, added, left_by_pair));
-            }
-            _ => {}
+        if confirmed {
+            return (
+                named(inp, decision, effect, None, fit_e, unexplained),
+                tests,
+            );
         }
+        pair = pair.or(second.map(|s| (effect, s)));
     }
     match pair {
-        Some((e1, e2, added, unexplained)) => {
-            let verdict_cols: Vec<usize> =
-                inp.cols.of(e1).into_iter().chain(inp.cols.of(e2)).collect();
-            let after_fit = inp.fits.bank.fit(&inp.cols.with(&verdict_cols));
-            (
-                Decision {
-                    verdict: Verdict::Effects {
-                        primary: e1,
-                        secondary: Some(Secondary {
-                            effect: e2,
-                            added_closure: added,
-                        }),
-                    },
-                    closest: Answer::Effect(e1),
-                    verdict_cols,
-                    gap_after: (after_fit.e_hold - inp.fits.e_floor).max(0.0),
-                    after_fit,
-                    unexplained,
-                    unexplained_rows: Vec::new(),
-                    ..decision
-                },
-                tests,
-            )
+        Some((e1, s)) => {
+            let cols: Vec<usize> = inp
+                .cols
+                .of(e1)
+                .into_iter()
+                .chain(inp.cols.of(s.effect))
+                .collect();
+            let after_fit = inp.fits.bank.fit(&inp.cols.with(&cols));
+            let secondary = Secondary {
+                effect: s.effect,
+                added_closure: s.added,
+            };
+            let d = named(inp, decision, e1, Some(secondary), after_fit, s.unexplained);
+            (d, tests)
         }
         None => (decision, tests),
+    }
+}
+
+/// `decision` with the confirmation's verdict: `primary` (and `secondary`), `after_fit`
+/// the bank's fit with their columns, `unexplained` the share of the gap above the noise
+/// the confirmation's run left.
+fn named(
+    inp: &Inputs<'_>,
+    decision: Decision,
+    primary: Effect,
+    secondary: Option<Secondary>,
+    after_fit: Fit,
+    unexplained: f64,
+) -> Decision {
+    let verdict = Verdict::Effects { primary, secondary };
+    let verdict_cols = verdict
+        .effects()
+        .into_iter()
+        .flat_map(|e| inp.cols.of(e))
+        .collect();
+    Decision {
+        verdict,
+        closest: Answer::Effect(primary),
+        verdict_cols,
+        gap_after: (after_fit.e_hold - inp.fits.e_floor).max(0.0),
+        after_fit,
+        unexplained,
+        unexplained_rows: Vec::new(),
+        ..decision
     }
 }
 
@@ -678,7 +678,11 @@ fn test_one(
                 unexplained: p.judged.unexplained,
                 residual_over_noise: p.judged.residual_over_noise,
             }),
-            Some((p.effect, j.unexplained - p.judged.unexplained)),
+            Some(Second {
+                effect: p.effect,
+                added: j.unexplained - p.judged.unexplained,
+                unexplained: p.judged.unexplained,
+            }),
         ),
         None => (None, None),
     };
@@ -712,9 +716,18 @@ struct Tested {
     conf: Confirmation,
     /// The bank's fit with the candidate's columns.
     fit_e: Fit,
-    /// The second effect of a pair that passed, and the share of the gap above the noise
-    /// it adds to the run alone.
-    second: Option<(Effect, f64)>,
+    /// The second effect of a pair that passed.
+    second: Option<Second>,
+}
+
+/// The second effect of a pair that passed the two rules ([`Tested::second`]).
+#[derive(Clone, Copy)]
+struct Second {
+    effect: Effect,
+    /// The share of the held-out gap above the noise it adds to the run alone.
+    added: f64,
+    /// The share the pair leaves.
+    unexplained: f64,
 }
 
 /// A second effect that passes the two rules with a candidate's run (`partner`).
