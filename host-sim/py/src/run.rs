@@ -174,17 +174,18 @@ pub fn run_core<'py>(
 }
 
 /// The rate channel's datasheet on the simulated device, as `paragyro-sim rate-response
-/// [--seed N] [--precision P] [--allan-s S] [--allan-zero-memory-s S]`: `(report.json's
+/// [--seed N] [--precision P] [--allan-s S] [--allan-zero-memory-s S] [--allan-settle-s S]`: `(report.json's
 /// text, report.md's table, files written)`; with `out`, report.json, report.md and the
 /// PNGs are written there as the CLI writes them.
 #[pyfunction]
-#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, out=None))]
+#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, allan_settle_s=rate_response::ALLAN_SETTLE_S, out=None))]
 pub fn datasheet(
     py: Python<'_>,
     seed: u64,
     precision: &str,
     allan_s: Option<f64>,
     allan_zero_memory_s: Option<f64>,
+    allan_settle_s: f64,
     out: Option<PathBuf>,
 ) -> PyResult<(String, String, Vec<String>)> {
     let p = self::precision(precision).map_err(|e| e.into_pyerr(py))?;
@@ -203,11 +204,17 @@ pub fn datasheet(
                 "allan_zero_memory_s must be finite and >= 0 (got {m})"
             )));
         }
+        if !(allan_settle_s.is_finite() && allan_settle_s >= 0.0) {
+            return Err(Fail::Argument(format!(
+                "allan_settle_s must be finite and >= 0 (got {allan_settle_s})"
+            )));
+        }
         let o = rate_response::Options {
             precision: p,
             seed,
             allan_s,
             allan_zero_memory_s,
+            allan_settle_s,
         };
         let failed = |e: anyhow::Error| Fail::run("RunError", e);
         let (report, files) = match &out {

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 import paragyro
 
 
@@ -24,3 +26,11 @@ def test_datasheet_is_the_headlines_and_its_report_json(tmp_path):
     assert written == r
     assert (tmp_path / "rate" / "report.md").exists()
     assert any(p.suffix == ".png" for p in (tmp_path / "rate").iterdir())
+
+
+def test_an_allan_settle_that_is_not_a_time_is_an_argument_error():
+    # refused before any run: the static runs would take minutes
+    with pytest.raises(paragyro.ArgumentError):
+        paragyro.rate_response(allan_s=10.0, allan_settle_s=-1.0)
+    with pytest.raises(paragyro.ArgumentError):
+        paragyro.rate_response(allan_s=10.0, allan_settle_s=float("nan"))

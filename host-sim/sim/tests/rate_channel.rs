@@ -13,6 +13,7 @@ fn opts(seed: u64) -> Options {
         seed,
         allan_s: None,
         allan_zero_memory_s: None,
+        allan_settle_s: 0.0,
     }
 }
 
@@ -260,4 +261,38 @@ fn the_ramp_fit_reads_a_known_scale_factor_bias_and_bow() {
     assert!((f.bias_dps - 0.22).abs() < 0.005, "{}", f.bias_dps);
     // too few rates to fit: an error, not a number
     assert!(rate_response::ramp_fit([(0.0, 0.0)].into_iter(), fs).is_err());
+}
+
+/// The static Allan run's record starts `allan_settle_s` after the start-up: with a settle
+/// the figures of the record from the start-up (`from_start_up`) are those a run without
+/// the settle gives (the same seed, the same first seconds), and the settled record's are
+/// not; without a settle there is no second record.
+#[test]
+fn the_allan_record_starts_after_the_settle() {
+    let run = |settle: f64| {
+        let o = Options {
+            allan_settle_s: settle,
+            ..opts(3)
+        };
+        rate_response::allan(&o, 0.0, 12.0).unwrap()
+    };
+    let cold = run(0.0);
+    assert!(cold.from_start_up.is_none());
+    assert_eq!(cold.settle_s, 0.0);
+    let settled = run(6.0);
+    assert_eq!(settled.settle_s, 6.0);
+    let start = settled
+        .from_start_up
+        .as_ref()
+        .expect("the start-up's figures");
+    assert_eq!(start.arw_deg_rth, cold.arw_deg_rth);
+    assert_eq!(start.bias_instability_deg_h, cold.bias_instability_deg_h);
+    assert_ne!(settled.arw_deg_rth, cold.arw_deg_rth);
+    assert_eq!(settled.tau_s, cold.tau_s, "the same record length");
+    // a settle that is not a time is an error, not a run
+    let bad = Options {
+        allan_settle_s: f64::NAN,
+        ..opts(3)
+    };
+    assert!(rate_response::allan(&bad, 0.0, 12.0).is_err());
 }

@@ -24,9 +24,13 @@ pub struct Args {
     #[arg(long, value_name = "S")]
     pub allan_s: Option<f64>,
     /// The Allan runs' memory of the rate's zero μ̂xy, s (core `rate.zero_memory_s`; 0: the
-    /// slow RLS's 2 s estimate every sample), instead of the core's 600 s.
+    /// slow RLS's 2 s estimate every sample), instead of the core's.
     #[arg(long, value_name = "S")]
     pub allan_zero_memory_s: Option<f64>,
+    /// The Allan record starts this long after the start-up, s (the rate's zero settled;
+    /// the figures from the start-up are reported beside).
+    #[arg(long, value_name = "S", default_value_t = rate_response::ALLAN_SETTLE_S)]
+    pub allan_settle_s: f64,
 }
 
 /// Runs every measurement and writes the report.
@@ -45,11 +49,18 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
             "--allan-zero-memory-s must be finite and >= 0 (got {m})"
         )));
     }
+    if !(a.allan_settle_s.is_finite() && a.allan_settle_s >= 0.0) {
+        return Err(fail(EXIT_RUN)(anyhow::anyhow!(
+            "--allan-settle-s must be finite and >= 0 (got {})",
+            a.allan_settle_s
+        )));
+    }
     let o = Options {
         precision: a.precision.into(),
         seed: a.seed,
         allan_s: a.allan_s,
         allan_zero_memory_s: a.allan_zero_memory_s,
+        allan_settle_s: a.allan_settle_s,
     };
     let (report, files) = rate_response::run_all(&o, &a.out).map_err(fail(EXIT_RUN))?;
     let mut text = format!(

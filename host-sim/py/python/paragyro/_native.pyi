@@ -40,6 +40,7 @@ def rate_response(
     precision: str = "f32",
     allan_s: Optional[float] = None,
     allan_zero_memory_s: Optional[float] = None,
+    allan_settle_s: float = 600.0,
     out: Optional[str] = None,
 ) -> Tuple[str, str, List[str]]: ...
 def lot_columns() -> List[Tuple[str, str]]: ...

@@ -4,7 +4,7 @@ use std::f64::consts::{PI, TAU};
 
 use anyhow::{Result, ensure};
 
-use super::{AllanResult, BASE_DPS, NoiseResult, Options, T0_S, scenario, trace};
+use super::{AllanFigures, AllanResult, BASE_DPS, NoiseResult, Options, T0_S, scenario, trace};
 use crate::runner::core_config;
 use crate::trace::TraceRow;
 
@@ -118,9 +118,15 @@ impl Bound {
     }
 }
 
-/// A static run of `duration_s` at `rate_dps`: overlapping Allan deviation of the fast
-/// rate (valid samples from `T0_S`), ARW from the fit at τ = 1 s, bias instability.
+/// A static run at `rate_dps`: overlapping Allan deviation of the fast rate over
+/// `duration_s` from `o.allan_settle_s` after `T0_S` (valid samples), ARW from the fit at
+/// τ = 1 s, bias instability; and the same two figures over `duration_s` from `T0_S`.
 pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult> {
+    ensure!(
+        o.allan_settle_s.is_finite() && o.allan_settle_s >= 0.0,
+        "the Allan settle must be finite and >= 0 (got {})",
+        o.allan_settle_s
+    );
     let ev = if rate_dps == BASE_DPS {
         String::new()
     } else {
@@ -128,14 +134,38 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
             "[[event]]\nt_s = 0.0\nkind = \"ramp\"\nparam = \"rate_dps\"\nto = {rate_dps}\nduration_s = 0.0\n"
         )
     };
-    let mut sc = scenario(&ev, T0_S + duration_s)?;
+    let settle = o.allan_settle_s;
+    let mut sc = scenario(&ev, T0_S + settle + duration_s)?;
     sc.estimator.rate_zero_memory_s = o.allan_zero_memory_s;
     let tr = trace(&sc, o.precision, o.seed)?;
-    let y: Vec<f64> = tr
-        .iter()
-        .filter(|r| r.t_s >= T0_S)
-        .map(|r| r.rate_dps_est)
-        .collect();
+    let record = |from: f64| -> Vec<f64> {
+        tr.iter()
+            .filter(|r| r.t_s >= from && r.t_s < from + duration_s)
+            .map(|r| r.rate_dps_est)
+            .collect()
+    };
+    let (tau_s, adev_dps, figures) = adev(&record(T0_S + settle))?;
+    let from_start_up = if settle > 0.0 {
+        Some(adev(&record(T0_S))?.2)
+    } else {
+        None
+    };
+    Ok(AllanResult {
+        rate_dps,
+        duration_s,
+        settle_s: settle,
+        arw_deg_rth: figures.arw_deg_rth,
+        bias_instability_deg_h: figures.bias_instability_deg_h,
+        tau_s,
+        adev_dps,
+        from_start_up,
+    })
+}
+
+/// Overlapping Allan deviation of `y` (500 Hz) at τ growing by 1.25× up to a sixth of
+/// the record, with its ARW (the point nearest τ = 1 s, as white rate noise σ = N/√τ)
+/// and bias instability (the curve's minimum / 0.664).
+fn adev(y: &[f64]) -> Result<(Vec<f64>, Vec<f64>, AllanFigures)> {
     let fs = 500.0;
     let mut tau_s = Vec::new();
     let mut adev = Vec::new();
@@ -166,12 +196,9 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
         .map_or(0, |x| x.0);
     let n = adev[i1] * tau_s[i1].sqrt();
     let min = adev.iter().copied().fold(f64::INFINITY, f64::min);
-    Ok(AllanResult {
-        rate_dps,
-        duration_s,
+    let figures = AllanFigures {
         arw_deg_rth: n * 60.0,
         bias_instability_deg_h: min / 0.664 * 3600.0,
-        tau_s,
-        adev_dps: adev,
-    })
+    };
+    Ok((tau_s, adev, figures))
 }

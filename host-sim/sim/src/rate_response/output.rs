@@ -62,9 +62,16 @@ pub fn markdown(r: &Report) -> String {
     for a in &r.allan {
         let _ = writeln!(
             s,
-            "| ARW / bias instability at {} °/s ({} s) | {:.3} °/√h / {:.2} °/h | > 0.5 °/√h / 10–1000 °/h |",
-            a.rate_dps, a.duration_s, a.arw_deg_rth, a.bias_instability_deg_h
+            "| ARW / bias instability at {} °/s ({} s, from {} s after the start-up) | {:.3} °/√h / {:.2} °/h | > 0.5 °/√h / 10–1000 °/h |",
+            a.rate_dps, a.duration_s, a.settle_s, a.arw_deg_rth, a.bias_instability_deg_h
         );
+        if let Some(f) = &a.from_start_up {
+            let _ = writeln!(
+                s,
+                "| the same from the start-up (the rate's zero converging) | {:.3} °/√h / {:.2} °/h | |",
+                f.arw_deg_rth, f.bias_instability_deg_h
+            );
+        }
     }
     let _ = writeln!(
         s,
@@ -252,8 +259,10 @@ pub fn write_plots(
                 .zip(&a.adev_dps)
                 .map(|(t, v)| (t.log10(), v.log10()))
                 .collect();
-            p.lines
-                .push(Line::new(pts, c, 2).label(format!("{} °/s", a.rate_dps)));
+            p.lines.push(Line::new(pts, c, 2).label(format!(
+                "{} °/s, from {} s after the start-up",
+                a.rate_dps, a.settle_s
+            )));
         }
         p.legend = Some(SeriesLabelPosition::UpperRight);
         draw_panel(&body, &p)?;
