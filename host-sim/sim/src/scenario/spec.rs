@@ -374,7 +374,7 @@ pub struct EstimatorSpec {
     /// moves only by retunes); `None`: the core's default (0.25 Hz).
     pub retune_track_hz: Option<f64>,
     /// Memory of the rate's zero μ̂xy, s (core `rate.zero_memory_s`; 0: the slow RLS's
-    /// μ̂xy every sample); `None`: the core's default (600 s).
+    /// μ̂xy every sample); `None`: the core's default (3600 s).
     pub rate_zero_memory_s: Option<f64>,
     /// Drift tracking's κ (core `rls.drift_kappa`, module `drift`; 0 off); `None`: the
     /// core's default (3).
