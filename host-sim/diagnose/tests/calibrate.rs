@@ -366,7 +366,9 @@ fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
 /// The same record with the defaults: after the calibration's two steps the next would
 /// still move a θ by more than its σ, so the calibration takes further steps from the
 /// confirmation's budget (four in all, the budget spent), and with no run left the
-/// confirmation makes none: four whole-record runs, as with the two candidates above.
+/// confirmation makes none: four whole-record runs, as with the two candidates above. The
+/// report says which candidates went untested for that (a limitation), the ones the test
+/// above re-simulates.
 #[test]
 fn a_calibration_that_has_not_converged_takes_the_confirmations_runs() {
     let rec = slowest_path_record().unwrap();
@@ -380,6 +382,17 @@ fn a_calibration_that_has_not_converged_takes_the_confirmations_runs() {
     );
     assert!(r.confirmation.is_empty(), "{:?}", r.confirmation);
     assert!(!r.timing_s.contains_key("resimulate_to_confirm"));
+    let said = r
+        .limitations
+        .iter()
+        .find(|l| l.stage == "confirmation")
+        .unwrap_or_else(|| panic!("no confirmation limitation: {:?}", r.limitations));
+    assert!(
+        said.detail
+            .starts_with("force_leak, electrostatic_softening not re-simulated"),
+        "{}",
+        said.detail
+    );
 }
 
 /// A large geometric nonlinearity (−5e-6, 50× its detection limit) on a toleranced

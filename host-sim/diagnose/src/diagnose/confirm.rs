@@ -233,10 +233,17 @@ pub(crate) fn confirm(
     limits: &mut Vec<Limitation>,
 ) -> (Decision, Vec<Confirmation>) {
     if !inp.opts.resimulate
-        || inp.opts.confirm_runs == 0
         || !matches!(decision.verdict, Verdict::Unknown)
         || decision.residual_over_noise <= NONE_NOISE_MAX
     {
+        return (decision, Vec::new());
+    }
+    if inp.opts.confirm_runs == 0 {
+        // the candidates it would have tested are said, not dropped silently
+        let would = picks_up_to(inp, ranking, CONFIRM_MAX);
+        if !would.is_empty() {
+            limits.push(budget_spent(&would));
+        }
         return (decision, Vec::new());
     }
     let picks = picks(inp, ranking);
@@ -247,6 +254,7 @@ pub(crate) fn confirm(
     let mut left = inp.opts.confirm_runs;
     for (i, &(effect, first)) in picks.iter().enumerate() {
         if left == 0 {
+            limits.push(budget_spent(&picks[i..]));
             break;
         }
         // its first run, and steps with what is left after one run kept for each
@@ -349,7 +357,25 @@ fn named(
 /// Each pick comes with whether the first rule chose it: the second rule's candidates are
 /// re-simulated only with the runs the first rule's leave of the budget.
 fn picks(inp: &Inputs<'_>, ranking: &[Candidate]) -> Vec<(Effect, bool)> {
-    let max = CONFIRM_MAX.min(inp.opts.confirm_runs);
+    picks_up_to(inp, ranking, CONFIRM_MAX.min(inp.opts.confirm_runs))
+}
+
+/// The limitation of candidates the confirmation did not re-simulate: the budget's
+/// whole-record runs were spent (by the calibration's further steps, or by the candidates
+/// before them).
+fn budget_spent(untested: &[(Effect, bool)]) -> Limitation {
+    let names: Vec<&str> = untested.iter().map(|p| p.0.name()).collect();
+    Limitation::new(
+        "confirmation",
+        format!(
+            "{} not re-simulated: the whole-record runs of the budget (`confirm_runs`) were spent, the calibration's further steps taking from it first; the linear test's `unknown` stands",
+            names.join(", ")
+        ),
+    )
+}
+
+/// [`picks`] with at most `max` candidates.
+fn picks_up_to(inp: &Inputs<'_>, ranking: &[Candidate], max: usize) -> Vec<(Effect, bool)> {
     let t_of = |c: &Candidate| match (c.size, c.size_sigma) {
         (Some(v), Some(s)) if s > 0.0 && v.is_finite() => v.abs() / s,
         _ => 0.0,
