@@ -240,6 +240,11 @@ impl<T: Real> Estimator<T> {
         self.state.thermal.record(sc)
     }
 
+    /// The rate's zero and the settled updates in its mean (`persist`'s snapshot).
+    pub(crate) fn rate_zero(&self) -> (f64, f64) {
+        self.state.rate.zero()
+    }
+
     /// Samples processed.
     pub fn samples(&self) -> u64 {
         self.state.k

@@ -2,7 +2,9 @@
 //!
 //! A [`Snapshot`] holds what the estimator learned and a boot cannot re-derive quickly:
 //! θ̂1, θ̂2 (the linearisation point to start from), the pump centre, the traces of the
-//! two covariances and the health when it was taken. [`Snapshot::encode`] writes it as
+//! two covariances, the health when it was taken, the die temperature and the learned
+//! temperature coefficients, and the rate's zero with its count (a warm start goes on with
+//! that mean, counted as at most [`crate::rate::ZERO_RESTORE_S`] of updates). [`Snapshot::encode`] writes it as
 //! [`SNAPSHOT_LEN`] little-endian bytes with a magic, a [`SNAPSHOT_VERSION`], a CRC of
 //! the configuration it was taken under and a CRC-32 over everything;
 //! [`Snapshot::decode`] refuses anything else with a [`SnapshotError`].
@@ -27,9 +29,9 @@ use crate::physics::theta_from_physical;
 use crate::real::Real;
 
 /// Bytes of an encoded snapshot.
-pub const SNAPSHOT_LEN: usize = 196;
+pub const SNAPSHOT_LEN: usize = 212;
 /// Version of the encoding (bumped whenever the layout or the meaning changes).
-pub const SNAPSHOT_VERSION: u16 = 2;
+pub const SNAPSHOT_VERSION: u16 = 3;
 /// Magic at the start of a record.
 pub const SNAPSHOT_MAGIC: [u8; 4] = *b"PGWS";
 /// Smallest restored covariance per parameter (scaled units; the RLS must still move).
@@ -74,6 +76,10 @@ pub struct Snapshot {
     pub dtheta_dt: [f64; 2],
     /// Their variances, per K².
     pub dtheta_dt_var: [f64; 2],
+    /// The rate's zero μxy and the settled updates in its mean (0: none yet; module
+    /// [`crate::rate`]): a warm start goes on with that mean, counted as at most
+    /// [`crate::rate::ZERO_RESTORE_S`] of updates.
+    pub zero: [f64; 2],
 }
 
 /// Why a record was not used.
@@ -189,6 +195,8 @@ impl Snapshot {
             self.dtheta_dt[1],
             self.dtheta_dt_var[0],
             self.dtheta_dt_var[1],
+            self.zero[0],
+            self.zero[1],
         ] {
             w.put(&v.to_le_bytes());
         }
@@ -234,6 +242,7 @@ impl Snapshot {
         let temp_c = r.f64();
         let dtheta_dt = [r.f64(), r.f64()];
         let dtheta_dt_var = [r.f64(), r.f64()];
+        let zero = [r.f64(), r.f64()];
         Ok(Snapshot {
             config_crc,
             health_bits,
@@ -244,6 +253,7 @@ impl Snapshot {
             temp_c,
             dtheta_dt,
             dtheta_dt_var,
+            zero,
         })
     }
 }
@@ -258,6 +268,7 @@ impl<T: Real> Estimator<T> {
     pub fn snapshot(&self) -> Snapshot {
         let (theta1, theta2) = self.theta();
         let (temp_c, dtheta_dt, dtheta_dt_var) = self.thermal_record();
+        let (mu_xy, n) = self.rate_zero();
         Snapshot {
             config_crc: config_crc(self.config()),
             health_bits: self.health().bits(),
@@ -268,6 +279,7 @@ impl<T: Real> Estimator<T> {
             temp_c,
             dtheta_dt,
             dtheta_dt_var,
+            zero: [mu_xy, n],
         }
     }
 
@@ -333,7 +345,8 @@ impl<T: Real> Estimator<T> {
         let p = |tr: f64, n: f64| T::from_f64((tr / n).max(WARM_P_MIN).min(p_max));
         st.rls1.reset_covariance(p(snap.traces[0], 8.0));
         st.rls2.reset_covariance(p(snap.traces[1], 6.0));
-        st.rate.restart_zero();
+        st.rate
+            .restore_zero(snap.zero[0], snap.zero[1], d.cfg.fs_hz);
         st.sched
             .jump(snap.pump_centre_hz / (2.0 * d.units.f0_hz) - om_ref);
         let sc = [d.fit.sc1[DRIFT_COL].to_f64(), d.fit.sc2[DRIFT_COL].to_f64()];

@@ -463,6 +463,11 @@ pub const DRIVE_RING2: f64 = 0.1;
 /// `characterise` seed 25 at 17.246 s).
 pub const RING_HOLD: u32 = 25;
 
+/// A warm start's zero counts as at most this many seconds of settled updates
+/// ([`RateState::restore_zero`]): its mean goes on from the stored one, and what the device
+/// does after the restart outweighs it within this time (a μxy that moved while it was off).
+pub const ZERO_RESTORE_S: f64 = 600.0;
+
 /// The rate's zero is updated once in this many samples (the estimator's decision
 /// interval: it takes a phase of it that no decision, no thermal block falls on, so the
 /// tick's largest cost does not grow); its memory is hundreds of seconds.
@@ -625,6 +630,32 @@ impl<T: Real> RateState<T> {
     pub fn restart_zero(&mut self) {
         self.nom.zero_n = T::ZERO;
         self.nom.zero_wait = 0;
+    }
+
+    /// The rate's zero, μxy, and the settled updates in its mean (0: it follows the slow
+    /// RLS): what a warm start restores ([`Self::restore_zero`]).
+    pub fn zero(&self) -> (f64, f64) {
+        (self.nom.mu_xy.to_f64(), self.nom.zero_n.to_f64())
+    }
+
+    /// A warm start's zero: the stored μxy as a mean of `n` settled updates (at most
+    /// [`ZERO_RESTORE_S`] of them), kept as a total through the next re-linearisation;
+    /// `n` not finite and positive, or μxy not finite: [`Self::restart_zero`].
+    pub fn restore_zero(&mut self, mu_xy: f64, n: f64, fs_hz: f64) {
+        let cap = ZERO_RESTORE_S * fs_hz / ZERO_EVERY as f64;
+        if !(mu_xy.is_finite() && n.is_finite() && n >= 1.0) {
+            self.restart_zero();
+            return;
+        }
+        let mu = T::from_f64(mu_xy);
+        // the total is `mu_nom + zero_dev`: with `mu_nom` the stored zero and no stamp
+        // that can match, the next nominal keeps it as its deviation
+        self.nom.mu_nom = mu;
+        self.nom.zero_dev = T::ZERO;
+        self.nom.mu_xy = mu;
+        self.nom.zero_n = T::from_f64(n.min(cap));
+        self.nom.zero_wait = 0;
+        self.nom.stamp = Some([u64::MAX; 6]);
     }
 
     /// One sample: filters the row in both channels and solves it (when the drive is
@@ -917,5 +948,49 @@ mod tests {
         s.hold_zero(&d, 0.0, 0.0, false);
         s.hold_zero(&d, -3e-6, -3e-6, true);
         assert!((s.nom.zero_dev - 3e-6).abs() < 1e-18, "{}", s.nom.zero_dev);
+    }
+
+    /// A restored zero is kept as a total through the re-linearisation that follows a
+    /// warm start (the nominal re-formed about other θ̂), held while the estimate is not
+    /// settled, then averaged on with the restored count: a settled μ̂xy 1e-6 away moves
+    /// it by 1e-6/(n + 1), not to it.
+    #[test]
+    fn a_restored_zero_is_kept_through_the_relinearisation_and_averaged_on() {
+        let cfg = Config::table2();
+        let d = RateDesign::<f64>::of(&cfg);
+        let mut s = RateState::new(&d);
+        let (t1, t2) = crate::physics::theta_from_physical(&cfg.nominal);
+        s.refresh_nominal(&d, &t1, &t2);
+        let mu = 1.3e-4;
+        s.restore_zero(mu, 1e9, cfg.fs_hz);
+        let cap = ZERO_RESTORE_S * cfg.fs_hz / ZERO_EVERY as f64;
+        assert_eq!(s.zero(), (mu, cap));
+        // the linearisation point moves (a warm start's θ̂): the total stays
+        let mut t1w = t1;
+        let mut t2w = t2;
+        t1w[3] *= 1.1;
+        t2w[3] *= 0.9;
+        s.refresh_nominal(&d, &t1w, &t2w);
+        assert!((s.zero().0 - mu).abs() < 1e-18, "{}", s.zero().0);
+        // unsettled (the warm gate): held
+        s.hold_zero(&d, -1e-6, -1e-6, false);
+        assert!((s.zero().0 - mu).abs() < 1e-18);
+        // settled, after the quiet: one update 1e-6 away moves it by 1e-6/(n + 1)
+        for _ in 0..d.zero_quiet {
+            s.hold_zero(&d, 0.0, 0.0, true);
+        }
+        let before = s.zero().0;
+        let mu_nom = -0.5 * (t1w[3] + t2w[3]);
+        // dev14 = dev24 = −(the restored zero − μ_nom) − 1e-6: μ̂xy = the zero + 1e-6
+        let dev = -(before - mu_nom) - 1e-6;
+        s.hold_zero(&d, dev, dev, true);
+        let moved = s.zero().0 - before;
+        assert!(
+            (moved - 1e-6 / (cap + 1.0)).abs() < 1e-6 / cap * 1e-6,
+            "{moved:e}"
+        );
+        // a record without a zero: the mean restarts
+        s.restore_zero(mu, 0.0, cfg.fs_hz);
+        assert_eq!(s.zero().1, 0.0);
     }
 }

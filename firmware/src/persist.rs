@@ -433,7 +433,7 @@ pub struct SavePolicy {
 impl SavePolicy {
     /// The stm32f405 board's policy at 500 Hz: settled for 5 s, then the first save of
     /// the run; then after each retune (once settled again) but at most every 10 min,
-    /// and every hour regardless; 8 bytes programmed per tick (a 208-byte record in 26
+    /// and every hour regardless; 8 bytes programmed per tick (a 224-byte record in 28
     /// ticks; firmware/docs/notes.md "Warm start on the stm32f405 board" has the timing
     /// and the write budget).
     pub const BOARD: SavePolicy = SavePolicy {

@@ -21,6 +21,9 @@ fn settled_snapshot(est: &Estimator<f32>) -> Snapshot {
         // θ12, θ22 (−ω² + …) rise by as much of ω²
         dtheta_dt: [60e-6 * p.wx2, 66e-6 * p.wy2],
         dtheta_dt_var: [1e-16, 1e-16],
+        // the design's μxy + 2 % (in °/s: 2e-6 of μxy is ≈ 3.9 °/s of rate), a mean of
+        // an hour of updates
+        zero: [1.02 * est.config().nominal.mu_xy, 72_000.0],
     }
 }
 
@@ -213,4 +216,37 @@ fn warm_start_shortens_the_start_up_gate_only() {
         (w.settle_window, w.gate_jump, w.gate_bad),
         (c.settle_window, c.gate_jump, c.gate_bad)
     );
+}
+
+/// A warm start goes on with the stored rate's zero (μxy) as a mean, its count capped at
+/// [`crate::rate::ZERO_RESTORE_S`] of updates; a record without one (count 0) starts the
+/// zero afresh as a cold start does; and a snapshot holds the zero the estimator holds.
+#[test]
+fn warm_start_restores_the_rates_zero_as_a_capped_mean() {
+    let cfg = Config::table2();
+    let mut est = cfg.build::<f32>().unwrap();
+    let s = settled_snapshot(&est);
+    assert_eq!(est.boot_from(Some(&s.encode())), Start::Warm);
+    let cap = crate::rate::ZERO_RESTORE_S * cfg.fs_hz / crate::rate::ZERO_EVERY as f64;
+    let (mu0, n0) = est.rate_zero();
+    assert!((mu0 - s.zero[0]).abs() <= 1e-6 * s.zero[0].abs(), "{mu0}");
+    assert_eq!(n0, cap);
+    // kept through the first ticks (the nominal re-formed about the restored θ̂, the
+    // zero held while the warm gate lasts)
+    let sample = crate::sample::Sample::default();
+    for _ in 0..10 {
+        est.step(&sample);
+    }
+    let (mu, n) = est.rate_zero();
+    assert_eq!(mu, mu0);
+    assert_eq!(n, cap);
+    assert_eq!(est.snapshot().zero, [mu, n]);
+    // none stored: the mean starts afresh
+    let mut e2 = cfg.build::<f32>().unwrap();
+    let none = Snapshot {
+        zero: [s.zero[0], 0.0],
+        ..s
+    };
+    assert_eq!(e2.boot_from(Some(&none.encode())), Start::Warm);
+    assert_eq!(e2.rate_zero().1, 0.0);
 }

@@ -130,6 +130,7 @@ fn snapshot(i: u32) -> Snapshot {
         temp_c: 25.0,
         dtheta_dt: [0.0; 2],
         dtheta_dt_var: [1e-16; 2],
+        zero: [cfg.nominal.mu_xy, 12_000.0],
     }
 }
 
