@@ -223,6 +223,7 @@ fn rate_source() -> String {
         allan_s: None,
         allan_zero_memory_s: None,
         allan_settle_s: 0.0,
+        allan_warm_start: false,
     };
     let f = chirp(&o, 0.1, 200.0, 20.0, 24.0).expect("chirp");
     let (st, _) = step(&o).expect("step");

@@ -174,11 +174,13 @@ pub fn run_core<'py>(
 }
 
 /// The rate channel's datasheet on the simulated device, as `paragyro-sim rate-response
-/// [--seed N] [--precision P] [--allan-s S] [--allan-zero-memory-s S] [--allan-settle-s S]`: `(report.json's
+/// [--seed N] [--precision P] [--allan-s S] [--allan-zero-memory-s S] [--allan-settle-s S] [--allan-warm-start]`: `(report.json's
 /// text, report.md's table, files written)`; with `out`, report.json, report.md and the
 /// PNGs are written there as the CLI writes them.
 #[pyfunction]
-#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, allan_settle_s=rate_response::ALLAN_SETTLE_S, out=None))]
+// the Python signature's keyword arguments, one each (the CLI's flags)
+#[allow(clippy::too_many_arguments)]
+#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, allan_settle_s=rate_response::ALLAN_SETTLE_S, allan_warm_start=false, out=None))]
 pub fn datasheet(
     py: Python<'_>,
     seed: u64,
@@ -186,6 +188,7 @@ pub fn datasheet(
     allan_s: Option<f64>,
     allan_zero_memory_s: Option<f64>,
     allan_settle_s: f64,
+    allan_warm_start: bool,
     out: Option<PathBuf>,
 ) -> PyResult<(String, String, Vec<String>)> {
     let p = self::precision(precision).map_err(|e| e.into_pyerr(py))?;
@@ -215,6 +218,7 @@ pub fn datasheet(
             allan_s,
             allan_zero_memory_s,
             allan_settle_s,
+            allan_warm_start,
         };
         let failed = |e: anyhow::Error| Fail::run("RunError", e);
         let (report, files) = match &out {

@@ -51,6 +51,10 @@ pub struct Options {
     /// warm start does not carry the zero's mean). The figures from the start-up over the
     /// same length are reported beside them ([`AllanResult::from_start_up`]).
     pub allan_settle_s: f64,
+    /// Also the record of the same length after a warm start: the snapshot taken at the
+    /// settle's end, a second boot of the device (another noise seed) started from it
+    /// ([`AllanResult::after_warm_start`]).
+    pub allan_warm_start: bool,
 }
 
 /// The default of [`Options::allan_settle_s`], s: one memory of the core's rate zero
@@ -178,6 +182,9 @@ pub struct AllanResult {
     /// The same figures for the record of the same length from the start-up (the rate's
     /// zero still converging); `None` when `settle_s` is 0 (they are the ones above).
     pub from_start_up: Option<AllanFigures>,
+    /// The same figures for the record of the same length from a warm start's boot
+    /// ([`Options::allan_warm_start`]; `None` when not run).
+    pub after_warm_start: Option<AllanFigures>,
 }
 
 /// An Allan curve's two figures.

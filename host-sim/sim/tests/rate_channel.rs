@@ -14,6 +14,7 @@ fn opts(seed: u64) -> Options {
         allan_s: None,
         allan_zero_memory_s: None,
         allan_settle_s: 0.0,
+        allan_warm_start: false,
     }
 }
 
@@ -266,7 +267,8 @@ fn the_ramp_fit_reads_a_known_scale_factor_bias_and_bow() {
 /// The static Allan run's record starts `allan_settle_s` after the start-up: with a settle
 /// the figures of the record from the start-up (`from_start_up`) are those a run without
 /// the settle gives (the same seed, the same first seconds), and the settled record's are
-/// not; without a settle there is no second record.
+/// not; without a settle there is no second record. With `allan_warm_start` a third
+/// record follows a warm start from the snapshot at the settle's end.
 #[test]
 fn the_allan_record_starts_after_the_settle() {
     let run = |settle: f64| {
@@ -289,6 +291,25 @@ fn the_allan_record_starts_after_the_settle() {
     assert_eq!(start.bias_instability_deg_h, cold.bias_instability_deg_h);
     assert_ne!(settled.arw_deg_rth, cold.arw_deg_rth);
     assert_eq!(settled.tau_s, cold.tau_s, "the same record length");
+    assert!(settled.after_warm_start.is_none());
+    // with the warm start: the snapshot at the settle's end boots the device again (a
+    // settled snapshot, else an error), its record as long, its figures its own
+    let warm = rate_response::allan(
+        &Options {
+            allan_settle_s: 6.0,
+            allan_warm_start: true,
+            ..opts(3)
+        },
+        0.0,
+        12.0,
+    )
+    .unwrap();
+    let w = warm
+        .after_warm_start
+        .as_ref()
+        .expect("the warm start's figures");
+    assert!(w.arw_deg_rth.is_finite() && w.arw_deg_rth > 0.0, "{w:?}");
+    assert_ne!(w.arw_deg_rth, start.arw_deg_rth);
     // a settle that is not a time is an error, not a run
     let bad = Options {
         allan_settle_s: f64::NAN,

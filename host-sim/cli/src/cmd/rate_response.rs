@@ -31,6 +31,10 @@ pub struct Args {
     /// the figures from the start-up are reported beside).
     #[arg(long, value_name = "S", default_value_t = rate_response::ALLAN_SETTLE_S)]
     pub allan_settle_s: f64,
+    /// Also the hour after a warm start from the snapshot at the settle's end (a second
+    /// boot of the device, another noise seed).
+    #[arg(long)]
+    pub allan_warm_start: bool,
 }
 
 /// Runs every measurement and writes the report.
@@ -61,6 +65,7 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         allan_s: a.allan_s,
         allan_zero_memory_s: a.allan_zero_memory_s,
         allan_settle_s: a.allan_settle_s,
+        allan_warm_start: a.allan_warm_start,
     };
     let (report, files) = rate_response::run_all(&o, &a.out).map_err(fail(EXIT_RUN))?;
     let mut text = format!(

@@ -41,6 +41,7 @@ def rate_response(
     allan_s: Optional[float] = None,
     allan_zero_memory_s: Optional[float] = None,
     allan_settle_s: float = 600.0,
+    allan_warm_start: bool = False,
     out: Optional[str] = None,
 ) -> Tuple[str, str, List[str]]: ...
 def lot_columns() -> List[Tuple[str, str]]: ...

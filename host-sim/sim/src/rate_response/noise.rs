@@ -5,8 +5,11 @@ use std::f64::consts::{PI, TAU};
 use anyhow::{Result, ensure};
 
 use super::{AllanFigures, AllanResult, BASE_DPS, NoiseResult, Options, T0_S, scenario, trace};
-use crate::runner::core_config;
+use crate::runner::{Precision, closed_loop, core_config};
+use crate::scenario::Scenario;
 use crate::trace::TraceRow;
+use paragyro_core::Real;
+use paragyro_core::persist::Start;
 
 /// Noise: the same static run with and without front-end noise (same seed, same dither),
 /// over 4 s from `T0_S`; the bound for the channel's own transfer and for a brick wall
@@ -150,6 +153,15 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
     } else {
         None
     };
+    let after_warm_start = if o.allan_warm_start {
+        let y = match o.precision {
+            Precision::F32 => warm_record::<f32>(&sc, o.seed, settle, duration_s)?,
+            Precision::F64 => warm_record::<f64>(&sc, o.seed, settle, duration_s)?,
+        };
+        Some(adev(&y)?.2)
+    } else {
+        None
+    };
     Ok(AllanResult {
         rate_dps,
         duration_s,
@@ -159,7 +171,49 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
         tau_s,
         adev_dps,
         from_start_up,
+        after_warm_start,
     })
+}
+
+/// The fast rate over `duration_s` from `T0_S` after a warm start: the device run cold for
+/// `T0_S + settle` s (seed `seed`), its snapshot, a second boot of it (seed `seed + 1`)
+/// started from the snapshot.
+fn warm_record<T: Real>(
+    sc: &Scenario,
+    seed: u64,
+    settle: f64,
+    duration_s: f64,
+) -> Result<Vec<f64>> {
+    let build = || {
+        core_config(sc)
+            .build::<T>()
+            .map_err(|e| anyhow::anyhow!("core configuration: {e}"))
+    };
+    let mut cold_sc = sc.clone();
+    cold_sc.duration_s = T0_S + settle;
+    let mut cold = build()?;
+    closed_loop(&cold_sc, seed, &mut cold, |_| {}, |_| {})?;
+    let record = cold.snapshot().encode();
+    let mut warm = build()?;
+    match warm.boot_from(Some(&record)) {
+        Start::Warm => {}
+        Start::Cold(e) => anyhow::bail!("the snapshot at {settle} s was refused: {e:?}"),
+    }
+    let mut warm_sc = sc.clone();
+    warm_sc.duration_s = T0_S + duration_s;
+    let mut y = Vec::new();
+    closed_loop(
+        &warm_sc,
+        seed.wrapping_add(1),
+        &mut warm,
+        |_| {},
+        |ls| {
+            if ls.t_s >= T0_S {
+                y.push(ls.out.rate.rate_dps);
+            }
+        },
+    )?;
+    Ok(y)
 }
 
 /// Overlapping Allan deviation of `y` (500 Hz) at τ growing by 1.25× up to a sixth of

@@ -72,6 +72,13 @@ pub fn markdown(r: &Report) -> String {
                 f.arw_deg_rth, f.bias_instability_deg_h
             );
         }
+        if let Some(f) = &a.after_warm_start {
+            let _ = writeln!(
+                s,
+                "| the same from a warm start (its snapshot at {} s) | {:.3} °/√h / {:.2} °/h | |",
+                a.settle_s, f.arw_deg_rth, f.bias_instability_deg_h
+            );
+        }
     }
     let _ = writeln!(
         s,
