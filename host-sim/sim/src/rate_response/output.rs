@@ -242,39 +242,44 @@ pub fn write_plots(
         out.push("ramp.png".into());
     }
     if !r.allan.is_empty() {
-        let path = dir.join("allan.png");
-        let (root, body) = figure(&path, "Allan deviation of the fast rate")?;
-        let all = r.allan.iter().flat_map(|a| a.tau_s.iter().copied());
-        let (t0, t1) = min_max(all).unwrap_or((0.002, 1.0));
-        let ys = r
-            .allan
-            .iter()
-            .flat_map(|a| a.adev_dps.iter().map(|v| v.log10()));
-        let (y0, y1) = min_max(ys).unwrap_or((-4.0, 0.0));
-        let mut p = Panel::new(
-            "ADEV".into(),
-            (t0.log10(), t1.log10()),
-            (y0 - 0.2, y1 + 0.2),
-        )
-        .log_y();
-        p.x_desc = Some("log10 τ, s".into());
-        p.y_desc = "°/s".into();
-        for (a, c) in r.allan.iter().zip([RED, BLUE]) {
-            let pts = a
-                .tau_s
-                .iter()
-                .zip(&a.adev_dps)
-                .map(|(t, v)| (t.log10(), v.log10()))
-                .collect();
-            p.lines.push(Line::new(pts, c, 2).label(format!(
-                "{} °/s, from {} s after the start-up",
-                a.rate_dps, a.settle_s
-            )));
-        }
-        p.legend = Some(SeriesLabelPosition::UpperRight);
-        draw_panel(&body, &p)?;
-        root.present()?;
+        allan_plot(&dir.join("allan.png"), r)?;
         out.push("allan.png".into());
     }
     Ok(out)
+}
+
+/// allan.png: the static runs' Allan deviations (their records after the settle).
+fn allan_plot(path: &Path, r: &Report) -> Result<()> {
+    let (root, body) = figure(path, "Allan deviation of the fast rate")?;
+    let all = r.allan.iter().flat_map(|a| a.tau_s.iter().copied());
+    let (t0, t1) = min_max(all).unwrap_or((0.002, 1.0));
+    let ys = r
+        .allan
+        .iter()
+        .flat_map(|a| a.adev_dps.iter().map(|v| v.log10()));
+    let (y0, y1) = min_max(ys).unwrap_or((-4.0, 0.0));
+    let mut p = Panel::new(
+        "ADEV".into(),
+        (t0.log10(), t1.log10()),
+        (y0 - 0.2, y1 + 0.2),
+    )
+    .log_y();
+    p.x_desc = Some("log10 τ, s".into());
+    p.y_desc = "°/s".into();
+    for (a, c) in r.allan.iter().zip([RED, BLUE]) {
+        let pts = a
+            .tau_s
+            .iter()
+            .zip(&a.adev_dps)
+            .map(|(t, v)| (t.log10(), v.log10()))
+            .collect();
+        p.lines.push(Line::new(pts, c, 2).label(format!(
+            "{} °/s, from {} s after the start-up",
+            a.rate_dps, a.settle_s
+        )));
+    }
+    p.legend = Some(SeriesLabelPosition::UpperRight);
+    draw_panel(&body, &p)?;
+    root.present()?;
+    Ok(())
 }
