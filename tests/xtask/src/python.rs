@@ -6,9 +6,11 @@
 //! 2. `pip install -r host-sim/py/requirements-test.txt` (pinned maturin, numpy, pandas,
 //!    pyarrow, polars, dask, distributed, pytest), skipped when the venv already has that
 //!    exact file's packages (a stamp holds its text);
-//! 3. the package built and installed into it: `maturin develop --release` (the release
-//!    profile: CI builds the same dependencies in release for its later steps anyway;
-//!    `--profile test` cannot be used, `cargo rustc --profile test` builds a test harness);
+//! 3. the package built and installed into it: `maturin develop` in the dev profile at the
+//!    test profile's opt-level (`CARGO_PROFILE_DEV_OPT_LEVEL=3`; the test profile is the dev
+//!    one at opt-level 3), so that it reuses what `cargo test --workspace` compiled and builds
+//!    only pyo3 and the bindings (`--profile test` itself cannot be used: maturin builds with
+//!    `cargo rustc`, for which it means a test harness);
 //! 4. the CLI the tests compare against: the `paragyro-sim` binary `cargo test --workspace`
 //!    builds (in the test profile, for `host-sim/cli/tests/binary.rs`; `cargo test
 //!    --workspace --no-run`, at once after `cargo xtask test`'s test run, which just built
@@ -24,8 +26,9 @@ use std::time::Instant;
 
 use crate::{cargo, say};
 
-/// The cargo profile of the extension.
-const PROFILE: &str = "release";
+/// The cargo profile of the extension, and the opt-level that makes it the test profile's.
+const PROFILE: &str = "dev";
+const PROFILE_OPT_LEVEL: (&str, &str) = ("CARGO_PROFILE_DEV_OPT_LEVEL", "3");
 
 /// The output directory of the test profile, where `cargo test` builds the CLI.
 const TEST_PROFILE_DIR: &str = "debug";
@@ -70,7 +73,9 @@ pub fn test(pytest_args: &[String]) -> Result<(), String> {
     ];
     let manifest = root.join("host-sim/py/Cargo.toml");
     say(&format!(
-        "maturin develop --profile {PROFILE} (the package into {})",
+        "maturin develop --profile {PROFILE} ({}={}: the test profile's; the package into {})",
+        PROFILE_OPT_LEVEL.0,
+        PROFILE_OPT_LEVEL.1,
         venv.display()
     ));
     let t = Instant::now();
@@ -79,6 +84,7 @@ pub fn test(pytest_args: &[String]) -> Result<(), String> {
             .args(["develop", "--quiet", "--profile", PROFILE])
             .arg("--manifest-path")
             .arg(&manifest)
+            .env(PROFILE_OPT_LEVEL.0, PROFILE_OPT_LEVEL.1)
             .envs(venv_env.iter().cloned()),
         "maturin develop",
     )?;
