@@ -400,6 +400,15 @@ fn the_thermal_report_reads_the_warm_up() {
         "followed {} ppm/s",
         t.drift_th22_max_ppm_s
     );
+    // the ramp's sudden onset is its worst part (the drift tracker's lead catching up):
+    // without its first 0.5 s the rms falls, and the mean is a share of the rms
+    assert!(
+        t.rate_err_rms_after_onset_dps < t.rate_err_rms_during_dps,
+        "rms after the onset {} against {} during",
+        t.rate_err_rms_after_onset_dps,
+        t.rate_err_rms_during_dps
+    );
+    assert!(t.rate_err_mean_during_dps.abs() < t.rate_err_rms_during_dps);
     // the sense amplitude against the oracle twin whose pump sits at 2·f_y: ≥ 98 % at every
     // second of the warm-up
     let oracle = oracle_shared(&sc);
@@ -417,6 +426,7 @@ fn the_thermal_report_reads_the_warm_up() {
         "{md}"
     );
     assert!(md.contains("against the oracle twin's"), "{md}");
+    assert!(md.contains("rms after its first 0.5 s / mean"), "{md}");
     // a scenario without a temperature profile has no thermal report
     let plain = Scenario::builtin("drift-retune").expect("built in");
     assert!(paragyro_simulator::thermal::ThermalReport::of(&plain, &r.trace).is_err());
