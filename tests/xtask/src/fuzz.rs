@@ -24,7 +24,7 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command};
 
 use crate::{cargo, say};
 
@@ -108,45 +108,124 @@ pub fn fuzz(args: &[String]) -> Result<(), String> {
     run_targets(&targets, secs)
 }
 
-/// Builds the targets with coverage instrumentation and runs each for `secs` seconds.
-pub fn run_targets(targets: &[&'static str], secs: u32) -> Result<(), String> {
+/// Where the targets are built and run: the repository root and `target/libfuzzer`.
+fn dirs() -> (PathBuf, PathBuf) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let root = root.canonicalize().unwrap_or(root);
     let out = root.join("target/libfuzzer");
-    let host = host_triple()?;
-    let manifest = root.join("tests/fuzz/Cargo.toml");
-    let (manifest_s, out_s) = (manifest.to_string_lossy(), out.to_string_lossy());
-    let build = [
-        "build",
-        "--release",
-        "--locked",
-        "--manifest-path",
-        &manifest_s,
-        "--features",
-        "libfuzzer",
-        "--bins",
-        "--target",
-        &host,
-        "--target-dir",
-        &out_s,
-    ];
-    say(&format!(
-        "building the libFuzzer targets: RUSTFLAGS=\"{SANCOV}\" cargo {}",
-        build.join(" ")
-    ));
-    let status = Command::new(cargo())
-        .args(build)
-        .env("RUSTFLAGS", SANCOV)
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .status()
-        .map_err(|e| format!("cannot start cargo: {e}"))?;
-    if !status.success() {
-        return Err(format!(
-            "building the fuzz targets failed ({status}): the compiler's messages are above \
+    (root, out)
+}
+
+/// Builds the targets with coverage instrumentation and runs each for `secs` seconds.
+pub fn run_targets(targets: &[&'static str], secs: u32) -> Result<(), String> {
+    Build::start(false)?.finish()?;
+    run_built(targets, secs)
+}
+
+/// The build of the fuzz targets into `target/libfuzzer/` (module docs), running.
+pub struct Build {
+    child: Child,
+    /// The log it writes in the background (`None`: on the terminal).
+    log: Option<PathBuf>,
+}
+
+impl Build {
+    /// Starts the build: on the terminal, or in the `background` beside the tests' run,
+    /// at the lowest CPU priority (`nice -n 19`, where there is one), its messages into
+    /// `target/libfuzzer/build.log`.
+    pub fn start(background: bool) -> Result<Build, String> {
+        let (root, out) = dirs();
+        let host = host_triple()?;
+        let manifest = root.join("tests/fuzz/Cargo.toml");
+        let (manifest_s, out_s) = (manifest.to_string_lossy(), out.to_string_lossy());
+        let build = [
+            "build",
+            "--release",
+            "--locked",
+            "--manifest-path",
+            &manifest_s,
+            "--features",
+            "libfuzzer",
+            "--bins",
+            "--target",
+            &host,
+            "--target-dir",
+            &out_s,
+        ];
+        let mut cmd = if background && crate::found("nice") {
+            let mut c = Command::new("nice");
+            c.args(["-n", "19"]).arg(cargo());
+            c
+        } else {
+            Command::new(cargo())
+        };
+        cmd.args(build)
+            .env("RUSTFLAGS", SANCOV)
+            .env_remove("CARGO_ENCODED_RUSTFLAGS");
+        let log = if background {
+            let log = out.join("build.log");
+            std::fs::create_dir_all(&out)
+                .map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+            let f = std::fs::File::create(&log)
+                .map_err(|e| format!("cannot create {}: {e}", log.display()))?;
+            let f2 = f
+                .try_clone()
+                .map_err(|e| format!("cannot write {}: {e}", log.display()))?;
+            cmd.stdout(f).stderr(f2);
+            Some(log)
+        } else {
+            None
+        };
+        say(&format!(
+            "building the libFuzzer targets{}: RUSTFLAGS=\"{SANCOV}\" cargo {}",
+            log.as_ref().map_or(String::new(), |l| format!(
+                " (in the background, into {})",
+                l.display()
+            )),
+            build.join(" ")
+        ));
+        let child = cmd
+            .spawn()
+            .map_err(|e| format!("cannot start cargo: {e}"))?;
+        Ok(Build { child, log })
+    }
+
+    /// Waits for the build; its error names the compiler's messages.
+    pub fn finish(mut self) -> Result<(), String> {
+        let status = self
+            .child
+            .wait()
+            .map_err(|e| format!("the fuzz targets' build: {e}"))?;
+        if status.success() {
+            return Ok(());
+        }
+        let messages = match &self.log {
+            Some(log) => {
+                let text = std::fs::read_to_string(log).unwrap_or_default();
+                let tail: Vec<&str> = text.lines().rev().take(40).collect();
+                let tail: Vec<&str> = tail.into_iter().rev().collect();
+                format!("in {}:\n{}", log.display(), tail.join("\n"))
+            }
+            None => "above".into(),
+        };
+        Err(format!(
+            "building the fuzz targets failed ({status}): the compiler's messages are {messages}\n\
              (libFuzzer itself needs a C++ compiler, `c++`: Debian's g++, which `cargo xtask \
              setup` installs)"
-        ));
+        ))
     }
+
+    /// Stops the build (the tests beside it failed).
+    pub fn stop(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs each of the built targets ([`Build`]) for `secs` seconds.
+pub fn run_built(targets: &[&'static str], secs: u32) -> Result<(), String> {
+    let (root, out) = dirs();
+    let host = host_triple()?;
     let bin_dir = out.join(&host).join("release");
     let mut figures = Vec::new();
     for lane in lanes(targets) {

@@ -150,38 +150,70 @@ fn setup() -> Result<(), String> {
 }
 
 /// `cargo test --workspace ARGS`, then (on a full run) the Python tests and the fuzzing.
+///
+/// On a full run the fuzz targets build in the background at the lowest CPU priority while
+/// the tests run (built first, `--no-run`): the tests leave a core idle for much of their
+/// run, and the build takes it.
 fn test(args: &[String], python: bool) -> Result<(), String> {
-    let mut all = vec!["test".to_string(), "--workspace".to_string()];
-    all.extend(args.iter().cloned());
-    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
-    say(&format!("cargo {}", refs.join(" ")));
-    run(&cargo(), &refs)?;
-    // the Python package (host-sim/py): only on a full run, like the fuzzing
-    if args.is_empty() {
-        if python {
-            let t0 = std::time::Instant::now();
-            python::test(&[])?;
-            say(&format!(
-                "python tests: {:.0} s (venv, packages, build, pytest)",
-                t0.elapsed().as_secs_f64()
-            ));
-        } else {
-            say("python tests: skipped (--no-python or PARAGYRO_SKIP_PYTHON)");
-        }
-    }
-    // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
-    // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
-    if args.is_empty() && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
-        let secs =
-            match env::var("PARAGYRO_FUZZ_SECS") {
+    let full = args.is_empty();
+    let fuzz_secs =
+        if full && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
+            Some(match env::var("PARAGYRO_FUZZ_SECS") {
                 Ok(v) => v.parse().ok().filter(|s| *s > 0).ok_or_else(|| {
                     format!("PARAGYRO_FUZZ_SECS={v}: not a positive whole number")
                 })?,
                 Err(_) => fuzz::DEFAULT_SECS,
-            };
-        fuzz::run_targets(&fuzz::TARGETS, secs)?;
+            })
+        } else {
+            None
+        };
+    let mut all = vec!["test".to_string(), "--workspace".to_string()];
+    all.extend(args.iter().cloned());
+    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+    let fuzz_build = match fuzz_secs {
+        Some(_) => {
+            say("cargo test --workspace --no-run");
+            run(&cargo(), &["test", "--workspace", "--no-run"])?;
+            Some(fuzz::Build::start(true)?)
+        }
+        None => None,
+    };
+    say(&format!("cargo {}", refs.join(" ")));
+    let tests = run(&cargo(), &refs).and_then(|()| {
+        // the Python package (host-sim/py): only on a full run, like the fuzzing
+        if full {
+            if python {
+                let t0 = std::time::Instant::now();
+                python::test(&[])?;
+                say(&format!(
+                    "python tests: {:.0} s (venv, packages, build, pytest)",
+                    t0.elapsed().as_secs_f64()
+                ));
+            } else {
+                say("python tests: skipped (--no-python or PARAGYRO_SKIP_PYTHON)");
+            }
+        }
+        Ok(())
+    });
+    // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
+    // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
+    match (tests, fuzz_build, fuzz_secs) {
+        (Err(e), Some(b), _) => {
+            b.stop();
+            Err(e)
+        }
+        (Err(e), None, _) => Err(e),
+        (Ok(()), Some(b), Some(secs)) => {
+            let t0 = std::time::Instant::now();
+            b.finish()?;
+            say(&format!(
+                "fuzz targets built (waited {:.0} s for the background build)",
+                t0.elapsed().as_secs_f64()
+            ));
+            fuzz::run_built(&fuzz::TARGETS, secs)
+        }
+        (Ok(()), _, _) => Ok(()),
     }
-    Ok(())
 }
 
 fn cargo() -> String {
