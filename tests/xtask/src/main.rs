@@ -12,8 +12,9 @@
 //!   fails with a message naming what is missing, or is skipped with `PARAGYRO_SKIP_QEMU=1`).
 //! * `cargo xtask setup` — only install.
 //! * `cargo xtask fuzz [--secs N] [TARGET ...]` — the bounded libFuzzer run of `tests/fuzz`
-//!   (module [`fuzz`]); `cargo xtask test` runs it after the tests, 20 s per target
-//!   (`PARAGYRO_FUZZ_SECS` sets another length, `PARAGYRO_SKIP_FUZZ=1` skips it).
+//!   (module [`fuzz`]); `cargo xtask test` builds its targets in the background while the
+//!   tests run and runs them after the tests, 20 s per target (`PARAGYRO_FUZZ_SECS` sets
+//!   another length, `PARAGYRO_SKIP_FUZZ=1` skips it).
 //! * `cargo xtask py [PYTEST ARGS]` — the Python package's tests alone (module [`python`]):
 //!   a venv `target/py-venv` with the pinned packages of `host-sim/py/requirements-test.txt`,
 //!   the package built into it with maturin, then pytest. `cargo xtask test` runs them after
