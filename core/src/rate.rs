@@ -344,6 +344,9 @@ struct NominalSlow<T> {
     zero_n: T,
     /// Updates of the zero still left out since the slow estimate was last unsettled.
     zero_wait: u32,
+    /// A covariance reset restarted the zero ([`RateState::restart_zero`]): its mean
+    /// starts one slow memory after the estimate settles again.
+    zero_restarted: bool,
     th24: T,
     /// The θ_nom components it was formed from (bit patterns; `None`: not yet).
     stamp: Option<[u64; 6]>,
@@ -573,6 +576,7 @@ impl<T: Real> RateState<T> {
             zero_dev,
             zero_n: self.nom.zero_n,
             zero_wait: self.nom.zero_wait,
+            zero_restarted: self.nom.zero_restarted,
             th24: T::from_f64(th2n[3]),
             stamp: Some(key),
         };
@@ -599,24 +603,32 @@ impl<T: Real> RateState<T> {
     /// with weight `1/n` down to `rate.zero_memory_s`'s. The cross-damping does not move
     /// with temperature, and the slow RLS's 2 s memory would pass its estimation noise
     /// (mostly the drive's θ14: a tenth of a °/s over 10 s) into the rate's low
-    /// frequencies. Until the first settled sample after a reset the zero follows the slow
-    /// RLS; while the slow estimate is not settled (a gate, a change pending) it is held,
-    /// and once the mean has started, for one slow memory after too: θ14 and θ24
-    /// re-converge at their own speeds after a rate step (the drive's rows resolve the rate
-    /// less well), and their sum carries the step until they have.
+    /// frequencies. Until the first settled sample after the boot the zero follows the
+    /// slow RLS, and after a covariance reset until one slow memory after the estimate
+    /// settles again ([`Self::restart_zero`]); while the slow estimate is not settled (a
+    /// gate, a change pending) a started mean is held, and for one slow memory after too:
+    /// θ14 and θ24 re-converge at their own speeds after a rate step (the drive's rows
+    /// resolve the rate less well), and their sum carries the step until they have.
     #[inline(always)]
     pub fn hold_zero(&mut self, d: &RateDesign<T>, dev14: T, dev24: T, settled: bool) {
         let n = &mut self.nom;
         let mu_dev = -T::from_f64(0.5) * (dev14 + dev24);
-        // `zero_wait` > 0 only once the mean has started (`restart_zero` clears both)
+        // before the mean has started (`zero_n` 0) the zero follows the slow RLS; the wait
+        // holds a started mean, and after a reset keeps the zero following through the
+        // first slow memory of the re-settled estimate (the boot's first settle starts it)
+        let started = n.zero_n > T::ZERO;
         if !settled {
-            if n.zero_n > T::ZERO {
+            if started || n.zero_restarted {
                 n.zero_wait = d.zero_quiet;
-            } else {
+            }
+            if !started {
                 n.zero_dev = mu_dev;
             }
         } else if n.zero_wait > 0 {
             n.zero_wait -= 1;
+            if !started {
+                n.zero_dev = mu_dev;
+            }
         } else {
             n.zero_n += T::ONE;
             let a = T::ONE / n.zero_n;
@@ -626,10 +638,14 @@ impl<T: Real> RateState<T> {
         n.mu_xy = n.mu_nom + n.zero_dev;
     }
 
-    /// A covariance reset: the rate's zero follows the slow RLS again until it settles.
+    /// A covariance reset: the rate's zero follows the slow RLS again until one slow
+    /// memory after it settles. The re-identification's first memory after the settle
+    /// still carries the drive's θ14 re-converging (the drive's rows resolve it poorly),
+    /// which a mean started at the settle would keep for its whole memory.
     pub fn restart_zero(&mut self) {
         self.nom.zero_n = T::ZERO;
         self.nom.zero_wait = 0;
+        self.nom.zero_restarted = true;
     }
 
     /// The rate's zero, μxy, and the settled updates in its mean (0: it follows the slow
@@ -943,11 +959,33 @@ mod tests {
         // then averaged again
         s.hold_zero(&d, -1e-5, -1e-5, true);
         assert!(s.nom.zero_dev > held, "{} after the memory", s.nom.zero_dev);
-        // after a reset the zero follows the slow RLS until the mean starts again
+        // after a reset the zero follows the slow RLS through the re-settled estimate's
+        // first slow memory (its θ14 still re-converging), then the mean starts again
         s.restart_zero();
         s.hold_zero(&d, 0.0, 0.0, false);
+        for i in 0..d.zero_quiet {
+            let dev = -1e-6 * f64::from(i + 1);
+            s.hold_zero(&d, dev, dev, true);
+            assert!((s.nom.zero_dev + dev).abs() < 1e-18, "{}", s.nom.zero_dev);
+            assert_eq!(s.zero().1, 0.0, "not averaged while it follows");
+        }
         s.hold_zero(&d, -3e-6, -3e-6, true);
+        assert_eq!(s.zero().1, 1.0);
         assert!((s.nom.zero_dev - 3e-6).abs() < 1e-18, "{}", s.nom.zero_dev);
+    }
+
+    /// At the boot the mean starts on the first settled update (no reset has restarted
+    /// it; a warm start restores it).
+    #[test]
+    fn at_the_boot_the_zero_is_averaged_from_the_first_settled_update() {
+        let cfg = Config::table2();
+        let d = RateDesign::<f64>::of(&cfg);
+        let mut s = RateState::new(&d);
+        s.hold_zero(&d, -2e-6, -2e-6, false);
+        assert!((s.nom.zero_dev - 2e-6).abs() < 1e-18);
+        s.hold_zero(&d, -1e-6, -1e-6, true);
+        assert_eq!(s.zero().1, 1.0);
+        assert!((s.nom.zero_dev - 1e-6).abs() < 1e-18, "{}", s.nom.zero_dev);
     }
 
     /// A restored zero is kept as a total through the re-linearisation that follows a
