@@ -252,6 +252,11 @@ fn rms(v: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n == 0 { f64::NAN } else { s / n as f64 }
+}
+
 fn share(rows: &[&TraceRow]) -> f64 {
     if rows.is_empty() {
         return f64::NAN;
@@ -321,18 +326,16 @@ impl ThermalReport {
                     .filter(|r| r.temp_c >= k && r.temp_c < k + 1.0)
                     .collect();
                 if !rows.is_empty() {
-                    let n = rows.len() as f64;
                     bins.push(KelvinBin {
                         temp_c: k + 0.5,
                         samples: rows.len(),
                         valid: share(&rows),
-                        rate_err_mean_dps: rows.iter().map(err).sum::<f64>() / n,
+                        rate_err_mean_dps: mean(rows.iter().map(err)),
                         rate_err_rms_dps: rms(rows.iter().map(err)),
-                        pump_offset_mean_hz: rows
-                            .iter()
-                            .map(|r| r.pump_centre_hz - pump_target_hz(sc, r))
-                            .sum::<f64>()
-                            / n,
+                        pump_offset_mean_hz: mean(
+                            rows.iter()
+                                .map(|r| r.pump_centre_hz - pump_target_hz(sc, r)),
+                        ),
                     });
                 }
                 k += 1.0;
@@ -353,11 +356,7 @@ impl ThermalReport {
                 .iter()
                 .filter(|r| r.t_s >= t0 + ONSET_S)
                 .map(err)),
-            rate_err_mean_during_dps: if during.is_empty() {
-                f64::NAN
-            } else {
-                during.iter().map(err).sum::<f64>() / during.len() as f64
-            },
+            rate_err_mean_during_dps: mean(during.iter().map(err)),
             wy2_err_max: during
                 .iter()
                 .map(|r| (r.phys_est[4] - r.phys_true[4]).abs())
@@ -406,6 +405,7 @@ impl ThermalReport {
         let _ = writeln!(s, "| figure | value |\n|---|---|");
         let [lx, ly] = self.tcf_learned_ppm_k;
         let [tx, ty] = self.tcf_truth_ppm_k;
+        let onset = format!("rate error during the change: rms after its first {ONSET_S} s / mean");
         let rows = [
             (
                 "die temperature in the samples",
@@ -446,7 +446,7 @@ impl ThermalReport {
                 ),
             ),
             (
-                "rate error during the change: rms after its first 0.5 s / mean",
+                onset.as_str(),
                 format!(
                     "{:.3} °/s ({:.2}× the rms before) / {:+.3} °/s",
                     self.rate_err_rms_after_onset_dps,

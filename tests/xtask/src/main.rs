@@ -157,27 +157,24 @@ fn setup() -> Result<(), String> {
 /// run, and the build takes it.
 fn test(args: &[String], python: bool) -> Result<(), String> {
     let full = args.is_empty();
-    let fuzz_secs =
-        if full && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
-            Some(match env::var("PARAGYRO_FUZZ_SECS") {
+    let mut all = vec!["test".to_string(), "--workspace".to_string()];
+    all.extend(args.iter().cloned());
+    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+    // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
+    // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
+    let fuzzing = if full && env::var_os("PARAGYRO_SKIP_FUZZ").is_none() {
+        let secs =
+            match env::var("PARAGYRO_FUZZ_SECS") {
                 Ok(v) => v.parse().ok().filter(|s| *s > 0).ok_or_else(|| {
                     format!("PARAGYRO_FUZZ_SECS={v}: not a positive whole number")
                 })?,
                 Err(_) => fuzz::DEFAULT_SECS,
-            })
-        } else {
-            None
-        };
-    let mut all = vec!["test".to_string(), "--workspace".to_string()];
-    all.extend(args.iter().cloned());
-    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
-    let fuzz_build = match fuzz_secs {
-        Some(_) => {
-            say("cargo test --workspace --no-run");
-            run(&cargo(), &["test", "--workspace", "--no-run"])?;
-            Some(fuzz::Build::start(true)?)
-        }
-        None => None,
+            };
+        say("cargo test --workspace --no-run");
+        run(&cargo(), &["test", "--workspace", "--no-run"])?;
+        Some((secs, fuzz::Build::start(true)?))
+    } else {
+        None
     };
     say(&format!("cargo {}", refs.join(" ")));
     let tests = run(&cargo(), &refs).and_then(|()| {
@@ -196,24 +193,23 @@ fn test(args: &[String], python: bool) -> Result<(), String> {
         }
         Ok(())
     });
-    // the libFuzzer run of the fuzz targets (tests/fuzz is its own workspace; bounded,
-    // stable, no sanitizer); only on a full run, PARAGYRO_SKIP_FUZZ=1 skips it
-    match (tests, fuzz_build, fuzz_secs) {
-        (Err(e), Some(b), _) => {
-            b.stop();
+    match (tests, fuzzing) {
+        (Err(e), fuzzing) => {
+            if let Some((_, build)) = fuzzing {
+                build.stop();
+            }
             Err(e)
         }
-        (Err(e), None, _) => Err(e),
-        (Ok(()), Some(b), Some(secs)) => {
+        (Ok(()), Some((secs, build))) => {
             let t0 = std::time::Instant::now();
-            b.finish()?;
+            build.finish()?;
             say(&format!(
                 "fuzz targets built (waited {:.0} s for the background build)",
                 t0.elapsed().as_secs_f64()
             ));
             fuzz::run_built(&fuzz::TARGETS, secs)
         }
-        (Ok(()), _, _) => Ok(()),
+        (Ok(()), None) => Ok(()),
     }
 }
 
