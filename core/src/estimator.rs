@@ -240,8 +240,10 @@ impl<T: Real> Estimator<T> {
         self.state.thermal.record(sc)
     }
 
-    /// The rate's zero and the settled updates in its mean (`persist`'s snapshot).
-    pub(crate) fn rate_zero(&self) -> (f64, f64) {
+    /// The rate's zero μxy (the cross-damping the rate subtracts, γ = −(θ24 + μxy)/2) and
+    /// the settled updates in its mean, 0 while it follows the slow RLS: what a warm
+    /// start restores (module `rate`, `RateState::hold_zero`).
+    pub fn rate_zero(&self) -> (f64, f64) {
         self.state.rate.zero()
     }
 

@@ -177,8 +177,16 @@ pub struct AllanResult {
     pub arw_deg_rth: f64,
     /// Bias instability: min of the Allan deviation / 0.664, °/h.
     pub bias_instability_deg_h: f64,
+    /// τ of the curve's minimum (the bias instability's), s.
+    pub tau_min_s: f64,
+    /// The rate's zero alone at `tau_min_s`: the Allan deviation of the rate it
+    /// subtracts (−μxy·ω0/2, `Estimator::rate_zero`), °/s; how much of the minimum is the
+    /// zero's mean still moving.
+    pub zero_adev_at_min_dps: f64,
     pub tau_s: Vec<f64>,
     pub adev_dps: Vec<f64>,
+    /// The rate's zero's Allan deviation at `tau_s`, °/s.
+    pub zero_adev_dps: Vec<f64>,
     /// The same figures for the record of the same length from the start-up (the rate's
     /// zero still converging); `None` when `settle_s` is 0 (they are the ones above).
     pub from_start_up: Option<AllanFigures>,
@@ -194,6 +202,10 @@ pub struct AllanFigures {
     pub arw_deg_rth: f64,
     /// Bias instability, °/h.
     pub bias_instability_deg_h: f64,
+    /// τ of the curve's minimum, s.
+    pub tau_min_s: f64,
+    /// The rate's zero alone at `tau_min_s` ([`AllanResult::zero_adev_at_min_dps`]), °/s.
+    pub zero_adev_at_min_dps: f64,
 }
 
 /// The base scenario with `extra` TOML appended (events) and its length.

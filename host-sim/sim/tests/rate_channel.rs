@@ -317,3 +317,46 @@ fn the_allan_record_starts_after_the_settle() {
     };
     assert!(rate_response::allan(&bad, 0.0, 12.0).is_err());
 }
+
+/// The Allan report's zero share is the rate's zero's own movement: with the zero taken
+/// from the slow RLS every sample (`allan_zero_memory_s` 0) its 2 s estimate's wander is
+/// nearly all of the rate's deviation at τ ≈ 1 s, and held (the core's mean, 6–18 s
+/// after the start-up: still learning) under a fifth of that; the zero's curve has a point at every τ of the rate's, and the figure at the
+/// minimum is that curve's value there.
+#[test]
+fn the_allan_report_gives_the_rate_zeros_own_share() {
+    let run = |memory: Option<f64>| {
+        let o = Options {
+            allan_settle_s: 6.0,
+            allan_zero_memory_s: memory,
+            ..opts(3)
+        };
+        rate_response::allan(&o, 0.0, 12.0).unwrap()
+    };
+    let at_1s = |a: &rate_response::AllanResult| {
+        let i = a
+            .tau_s
+            .iter()
+            .enumerate()
+            .min_by(|x, y| x.1.ln().abs().total_cmp(&y.1.ln().abs()))
+            .unwrap()
+            .0;
+        (a.zero_adev_dps[i], a.adev_dps[i])
+    };
+    let held = run(None);
+    let every = run(Some(0.0));
+    for a in [&held, &every] {
+        assert_eq!(a.zero_adev_dps.len(), a.tau_s.len());
+        let i = a.tau_s.iter().position(|t| *t == a.tau_min_s).unwrap();
+        assert_eq!(a.zero_adev_dps[i], a.zero_adev_at_min_dps);
+        assert!(a.from_start_up.as_ref().unwrap().zero_adev_at_min_dps > 0.0);
+    }
+    let (z_every, r_every) = at_1s(&every);
+    let (z_held, r_held) = at_1s(&held);
+    assert!(
+        z_every > 0.9 * r_every,
+        "every sample: zero {z_every} of {r_every}"
+    );
+    assert!(z_held < r_held, "held: zero {z_held} of {r_held}");
+    assert!(z_every > 5.0 * z_held, "{z_every} against {z_held}");
+}

@@ -5,11 +5,11 @@ use std::f64::consts::{PI, TAU};
 use anyhow::{Result, ensure};
 
 use super::{AllanFigures, AllanResult, BASE_DPS, NoiseResult, Options, T0_S, scenario, trace};
-use crate::runner::{Precision, closed_loop, core_config};
+use crate::runner::{LoopSample, Precision, closed_loop, core_config};
 use crate::scenario::Scenario;
 use crate::trace::TraceRow;
-use paragyro_core::Real;
 use paragyro_core::persist::Start;
+use paragyro_core::{Estimator, Real};
 
 /// Noise: the same static run with and without front-end noise (same seed, same dither),
 /// over 4 s from `T0_S`; the bound for the channel's own transfer and for a brick wall
@@ -122,8 +122,9 @@ impl Bound {
 }
 
 /// A static run at `rate_dps`: overlapping Allan deviation of the fast rate over
-/// `duration_s` from `o.allan_settle_s` after `T0_S` (valid samples), ARW from the fit at
-/// τ = 1 s, bias instability; and the same two figures over `duration_s` from `T0_S`.
+/// `duration_s` from `o.allan_settle_s` after `T0_S`, ARW from the fit at τ = 1 s, bias
+/// instability, and the rate's zero's share of the curve ([`AllanFigures`]); the same
+/// figures over `duration_s` from `T0_S`, and after a warm start when asked.
 pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult> {
     ensure!(
         o.allan_settle_s.is_finite() && o.allan_settle_s >= 0.0,
@@ -140,16 +141,13 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
     let settle = o.allan_settle_s;
     let mut sc = scenario(&ev, T0_S + settle + duration_s)?;
     sc.estimator.rate_zero_memory_s = o.allan_zero_memory_s;
-    let tr = trace(&sc, o.precision, o.seed)?;
-    let record = |from: f64| -> Vec<f64> {
-        tr.iter()
-            .filter(|r| r.t_s >= from && r.t_s < from + duration_s)
-            .map(|r| r.rate_dps_est)
-            .collect()
+    let run = match o.precision {
+        Precision::F32 => cold_run::<f32>(&sc, o.seed)?,
+        Precision::F64 => cold_run::<f64>(&sc, o.seed)?,
     };
-    let (tau_s, adev_dps, figures) = adev(&record(T0_S + settle))?;
+    let c = curves(&run.from(T0_S + settle, duration_s))?;
     let from_start_up = if settle > 0.0 {
-        Some(adev(&record(T0_S))?.2)
+        Some(curves(&run.from(T0_S, duration_s))?.figures)
     } else {
         None
     };
@@ -158,7 +156,7 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
             Precision::F32 => warm_record::<f32>(&sc, o.seed, settle, duration_s)?,
             Precision::F64 => warm_record::<f64>(&sc, o.seed, settle, duration_s)?,
         };
-        Some(adev(&y)?.2)
+        Some(curves(&y)?.figures)
     } else {
         None
     };
@@ -166,60 +164,149 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
         rate_dps,
         duration_s,
         settle_s: settle,
-        arw_deg_rth: figures.arw_deg_rth,
-        bias_instability_deg_h: figures.bias_instability_deg_h,
-        tau_s,
-        adev_dps,
+        arw_deg_rth: c.figures.arw_deg_rth,
+        bias_instability_deg_h: c.figures.bias_instability_deg_h,
+        tau_min_s: c.figures.tau_min_s,
+        zero_adev_at_min_dps: c.figures.zero_adev_at_min_dps,
+        tau_s: c.tau_s,
+        adev_dps: c.adev_dps,
+        zero_adev_dps: c.zero_adev_dps,
         from_start_up,
         after_warm_start,
     })
 }
 
-/// The fast rate over `duration_s` from `T0_S` after a warm start: the device run cold for
-/// `T0_S + settle` s (seed `seed`), its snapshot, a second boot of it (seed `seed + 1`)
-/// started from the snapshot.
-fn warm_record<T: Real>(
-    sc: &Scenario,
-    seed: u64,
-    settle: f64,
-    duration_s: f64,
-) -> Result<Vec<f64>> {
-    let build = || {
-        core_config(sc)
-            .build::<T>()
-            .map_err(|e| anyhow::anyhow!("core configuration: {e}"))
-    };
+/// A static run's fast rate and the rate's zero as a rate, every sample.
+#[derive(Default)]
+struct StaticRun {
+    t_s: Vec<f64>,
+    /// The fast rate, °/s.
+    rate: Vec<f64>,
+    /// The rate's zero as the rate it subtracts, −μxy·ω0/2 in °/s (`Estimator::rate_zero`).
+    zero: Vec<f64>,
+}
+
+impl StaticRun {
+    fn push<T: Real>(&mut self, ls: &LoopSample<'_, T>, zero_to_dps: f64) {
+        self.t_s.push(ls.t_s);
+        self.rate.push(ls.out.rate.rate_dps);
+        self.zero.push(ls.est.rate_zero().0 * zero_to_dps);
+    }
+
+    fn span(&self, from: f64, duration_s: f64) -> std::ops::Range<usize> {
+        let a = self.t_s.partition_point(|&t| t < from);
+        let b = self.t_s.partition_point(|&t| t < from + duration_s);
+        a..b
+    }
+
+    /// The two records over `duration_s` from `from` s.
+    fn from(&self, from: f64, duration_s: f64) -> Record {
+        let r = self.span(from, duration_s);
+        Record {
+            rate: self.rate[r.clone()].to_vec(),
+            zero: self.zero[r].to_vec(),
+        }
+    }
+}
+
+/// A record of the fast rate and, beside it, the rate's zero as a rate (°/s).
+struct Record {
+    rate: Vec<f64>,
+    zero: Vec<f64>,
+}
+
+/// °/s of rate per unit of the zero μxy: the rate is γ·ω0 with γ = −(θ24 + μxy)/2.
+fn zero_to_dps(sc: &Scenario) -> f64 {
+    -0.5 * core_config(sc).omega0_rad_s() * 180.0 / PI
+}
+
+/// The core of `sc`.
+fn build<T: Real>(sc: &Scenario) -> Result<Estimator<T>> {
+    core_config(sc)
+        .build::<T>()
+        .map_err(|e| anyhow::anyhow!("core configuration: {e}"))
+}
+
+/// The cold run of `sc`: the fast rate and the rate's zero every sample.
+fn cold_run<T: Real>(sc: &Scenario, seed: u64) -> Result<StaticRun> {
+    let mut est = build::<T>(sc)?;
+    let k = zero_to_dps(sc);
+    let mut run = StaticRun::default();
+    closed_loop(sc, seed, &mut est, |_| {}, |ls| run.push(ls, k))?;
+    Ok(run)
+}
+
+/// The fast rate and its zero over `duration_s` from `T0_S` after a warm start: the
+/// device run cold for `T0_S + settle` s (seed `seed`), its snapshot, a second boot of it
+/// (seed `seed + 1`) started from the snapshot.
+fn warm_record<T: Real>(sc: &Scenario, seed: u64, settle: f64, duration_s: f64) -> Result<Record> {
     let mut cold_sc = sc.clone();
     cold_sc.duration_s = T0_S + settle;
-    let mut cold = build()?;
+    let mut cold = build::<T>(sc)?;
     closed_loop(&cold_sc, seed, &mut cold, |_| {}, |_| {})?;
     let record = cold.snapshot().encode();
-    let mut warm = build()?;
+    let mut warm = build::<T>(sc)?;
     match warm.boot_from(Some(&record)) {
         Start::Warm => {}
         Start::Cold(e) => anyhow::bail!("the snapshot at {settle} s was refused: {e:?}"),
     }
     let mut warm_sc = sc.clone();
     warm_sc.duration_s = T0_S + duration_s;
-    let mut y = Vec::new();
+    let k = zero_to_dps(sc);
+    let mut run = StaticRun::default();
     closed_loop(
         &warm_sc,
         seed.wrapping_add(1),
         &mut warm,
         |_| {},
-        |ls| {
-            if ls.t_s >= T0_S {
-                y.push(ls.out.rate.rate_dps);
-            }
-        },
+        |ls| run.push(ls, k),
     )?;
-    Ok(y)
+    Ok(run.from(T0_S, duration_s))
+}
+
+/// A record's Allan curves: the fast rate's and its zero's, and the rate's figures.
+struct Curves {
+    tau_s: Vec<f64>,
+    adev_dps: Vec<f64>,
+    zero_adev_dps: Vec<f64>,
+    figures: AllanFigures,
+}
+
+/// The Allan curves of a record ([`adev`]) and the figures of the rate's: its ARW (the
+/// point nearest τ = 1 s, as white rate noise σ = N/√τ), its bias instability (the
+/// curve's minimum / 0.664) and, at the minimum's τ, the zero's own deviation.
+fn curves(rec: &Record) -> Result<Curves> {
+    let (tau_s, adev_dps) = adev(&rec.rate)?;
+    let (_, zero_adev_dps) = adev(&rec.zero)?;
+    // white rate noise: σ(τ) = N/√τ; N from the point nearest τ = 1 s
+    let i1 = tau_s
+        .iter()
+        .enumerate()
+        .min_by(|a, b| (a.1.ln().abs()).total_cmp(&b.1.ln().abs()))
+        .map_or(0, |x| x.0);
+    let n = adev_dps[i1] * tau_s[i1].sqrt();
+    let imin = adev_dps
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |x| x.0);
+    let figures = AllanFigures {
+        arw_deg_rth: n * 60.0,
+        bias_instability_deg_h: adev_dps[imin] / 0.664 * 3600.0,
+        tau_min_s: tau_s[imin],
+        zero_adev_at_min_dps: zero_adev_dps[imin],
+    };
+    Ok(Curves {
+        tau_s,
+        adev_dps,
+        zero_adev_dps,
+        figures,
+    })
 }
 
 /// Overlapping Allan deviation of `y` (500 Hz) at τ growing by 1.25× up to a sixth of
-/// the record, with its ARW (the point nearest τ = 1 s, as white rate noise σ = N/√τ)
-/// and bias instability (the curve's minimum / 0.664).
-fn adev(y: &[f64]) -> Result<(Vec<f64>, Vec<f64>, AllanFigures)> {
+/// the record.
+fn adev(y: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
     let fs = 500.0;
     let mut tau_s = Vec::new();
     let mut adev = Vec::new();
@@ -242,17 +329,5 @@ fn adev(y: &[f64]) -> Result<(Vec<f64>, Vec<f64>, AllanFigures)> {
         m = ((m as f64) * 1.25).ceil() as usize;
     }
     ensure!(!adev.is_empty(), "Allan run too short");
-    // white rate noise: σ(τ) = N/√τ; N from the point nearest τ = 1 s
-    let i1 = tau_s
-        .iter()
-        .enumerate()
-        .min_by(|a, b| (a.1.ln().abs()).total_cmp(&b.1.ln().abs()))
-        .map_or(0, |x| x.0);
-    let n = adev[i1] * tau_s[i1].sqrt();
-    let min = adev.iter().copied().fold(f64::INFINITY, f64::min);
-    let figures = AllanFigures {
-        arw_deg_rth: n * 60.0,
-        bias_instability_deg_h: min / 0.664 * 3600.0,
-    };
-    Ok((tau_s, adev, figures))
+    Ok((tau_s, adev))
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 
-use super::{Report, T0_S};
+use super::{AllanFigures, Report, T0_S};
 use crate::plot::*;
 use crate::trace::TraceRow;
 
@@ -21,6 +21,19 @@ pub fn write_text(dir: &Path, r: &Report) -> Result<Vec<String>> {
 
 fn opt(v: Option<f64>, unit: &str) -> String {
     v.map_or("—".into(), |x| format!("{x:.1} {unit}"))
+}
+
+/// An Allan record's cell: ARW, bias instability, and the rate's zero's own deviation at
+/// the minimum's τ beside the rate's there.
+fn allan_cell(f: &AllanFigures) -> String {
+    format!(
+        "{:.3} °/√h / {:.2} °/h (minimum {:.2} m°/s at τ = {:.0} s, the rate's zero alone {:.2} m°/s there)",
+        f.arw_deg_rth,
+        f.bias_instability_deg_h,
+        f.bias_instability_deg_h * 0.664 / 3.6,
+        f.tau_min_s,
+        f.zero_adev_at_min_dps * 1e3
+    )
 }
 
 /// The datasheet table beside the rate-grade figures (issue 10).
@@ -62,21 +75,30 @@ pub fn markdown(r: &Report) -> String {
     for a in &r.allan {
         let _ = writeln!(
             s,
-            "| ARW / bias instability at {} °/s ({} s, from {} s after the start-up) | {:.3} °/√h / {:.2} °/h | > 0.5 °/√h / 10–1000 °/h |",
-            a.rate_dps, a.duration_s, a.settle_s, a.arw_deg_rth, a.bias_instability_deg_h
+            "| ARW / bias instability at {} °/s ({} s, from {} s after the start-up) | {} | > 0.5 °/√h / 10–1000 °/h |",
+            a.rate_dps,
+            a.duration_s,
+            a.settle_s,
+            allan_cell(&AllanFigures {
+                arw_deg_rth: a.arw_deg_rth,
+                bias_instability_deg_h: a.bias_instability_deg_h,
+                tau_min_s: a.tau_min_s,
+                zero_adev_at_min_dps: a.zero_adev_at_min_dps,
+            })
         );
         if let Some(f) = &a.from_start_up {
             let _ = writeln!(
                 s,
-                "| the same from the start-up (the rate's zero converging) | {:.3} °/√h / {:.2} °/h | |",
-                f.arw_deg_rth, f.bias_instability_deg_h
+                "| the same from the start-up (the rate's zero converging) | {} | |",
+                allan_cell(f)
             );
         }
         if let Some(f) = &a.after_warm_start {
             let _ = writeln!(
                 s,
-                "| the same from a warm start (its snapshot at {} s) | {:.3} °/√h / {:.2} °/h | |",
-                a.settle_s, f.arw_deg_rth, f.bias_instability_deg_h
+                "| the same from a warm start (its snapshot at {} s) | {} | |",
+                a.settle_s,
+                allan_cell(f)
             );
         }
     }
@@ -258,6 +280,14 @@ fn allan_plot(path: &Path, r: &Report) -> Result<()> {
         .iter()
         .flat_map(|a| a.adev_dps.iter().map(|v| v.log10()));
     let (y0, y1) = min_max(ys).unwrap_or((-4.0, 0.0));
+    // the zero's curves down to 1.5 decades below the rate's
+    let floor = y0 - 1.5;
+    let zs = r
+        .allan
+        .iter()
+        .flat_map(|a| a.zero_adev_dps.iter().map(|v| v.log10()))
+        .filter(|v| *v >= floor);
+    let y0 = min_max(zs).map_or(y0, |(z0, _)| z0.min(y0));
     let mut p = Panel::new(
         "ADEV".into(),
         (t0.log10(), t1.log10()),
@@ -277,6 +307,18 @@ fn allan_plot(path: &Path, r: &Report) -> Result<()> {
             "{} °/s, from {} s after the start-up",
             a.rate_dps, a.settle_s
         )));
+        let zero = a
+            .tau_s
+            .iter()
+            .zip(&a.zero_adev_dps)
+            .map(|(t, v)| (t.log10(), v.log10()))
+            .filter(|(_, v)| *v >= y0)
+            .collect();
+        p.lines.push(
+            Line::new(zero, c, 1)
+                .dashed()
+                .label(format!("{} °/s: the rate's zero alone", a.rate_dps)),
+        );
     }
     p.legend = Some(SeriesLabelPosition::UpperRight);
     draw_panel(&body, &p)?;
