@@ -173,16 +173,10 @@ pub struct AllanResult {
     pub duration_s: f64,
     /// How long after the start-up (`T0_S`) the record starts, s.
     pub settle_s: f64,
-    /// Angle random walk from the τ^−1/2 fit at τ = 1 s, °/√h.
-    pub arw_deg_rth: f64,
-    /// Bias instability: min of the Allan deviation / 0.664, °/h.
-    pub bias_instability_deg_h: f64,
-    /// τ of the curve's minimum (the bias instability's), s.
-    pub tau_min_s: f64,
-    /// The rate's zero alone at `tau_min_s`: the Allan deviation of the rate it
-    /// subtracts (−μxy·ω0/2, `Estimator::rate_zero`), °/s; how much of the minimum is the
-    /// zero's mean still moving.
-    pub zero_adev_at_min_dps: f64,
+    /// ARW, bias instability, and the rate's zero alone at the minimum (flat in
+    /// report.json).
+    #[serde(flatten)]
+    pub figures: AllanFigures,
     pub tau_s: Vec<f64>,
     pub adev_dps: Vec<f64>,
     /// The rate's zero's Allan deviation at `tau_s`, °/s.
@@ -195,16 +189,18 @@ pub struct AllanResult {
     pub after_warm_start: Option<AllanFigures>,
 }
 
-/// An Allan curve's two figures.
+/// An Allan curve's figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct AllanFigures {
-    /// Angle random walk, °/√h.
+    /// Angle random walk from the τ^−1/2 fit at τ = 1 s, °/√h.
     pub arw_deg_rth: f64,
-    /// Bias instability, °/h.
+    /// Bias instability: min of the Allan deviation / 0.664, °/h.
     pub bias_instability_deg_h: f64,
     /// τ of the curve's minimum, s.
     pub tau_min_s: f64,
-    /// The rate's zero alone at `tau_min_s` ([`AllanResult::zero_adev_at_min_dps`]), °/s.
+    /// The rate's zero alone at `tau_min_s`: the Allan deviation of the rate it
+    /// subtracts (−μxy·ω0/2, `Estimator::rate_zero`), °/s; how much of the minimum is the
+    /// zero's mean still moving.
     pub zero_adev_at_min_dps: f64,
 }
 

@@ -287,9 +287,12 @@ fn the_allan_record_starts_after_the_settle() {
         .from_start_up
         .as_ref()
         .expect("the start-up's figures");
-    assert_eq!(start.arw_deg_rth, cold.arw_deg_rth);
-    assert_eq!(start.bias_instability_deg_h, cold.bias_instability_deg_h);
-    assert_ne!(settled.arw_deg_rth, cold.arw_deg_rth);
+    assert_eq!(start.arw_deg_rth, cold.figures.arw_deg_rth);
+    assert_eq!(
+        start.bias_instability_deg_h,
+        cold.figures.bias_instability_deg_h
+    );
+    assert_ne!(settled.figures.arw_deg_rth, cold.figures.arw_deg_rth);
     assert_eq!(settled.tau_s, cold.tau_s, "the same record length");
     assert!(settled.after_warm_start.is_none());
     // with the warm start: the snapshot at the settle's end boots the device again (a
@@ -347,8 +350,12 @@ fn the_allan_report_gives_the_rate_zeros_own_share() {
     let every = run(Some(0.0));
     for a in [&held, &every] {
         assert_eq!(a.zero_adev_dps.len(), a.tau_s.len());
-        let i = a.tau_s.iter().position(|t| *t == a.tau_min_s).unwrap();
-        assert_eq!(a.zero_adev_dps[i], a.zero_adev_at_min_dps);
+        let i = a
+            .tau_s
+            .iter()
+            .position(|t| *t == a.figures.tau_min_s)
+            .unwrap();
+        assert_eq!(a.zero_adev_dps[i], a.figures.zero_adev_at_min_dps);
         assert!(a.from_start_up.as_ref().unwrap().zero_adev_at_min_dps > 0.0);
     }
     let (z_every, r_every) = at_1s(&every);

@@ -27,10 +27,11 @@ fn opt(v: Option<f64>, unit: &str) -> String {
 /// the minimum's τ beside the rate's there.
 fn allan_cell(f: &AllanFigures) -> String {
     format!(
-        "{:.3} °/√h / {:.2} °/h (minimum {:.2} m°/s at τ = {:.0} s, the rate's zero alone {:.2} m°/s there)",
+        "{:.3} °/√h / {:.2} °/h (minimum {:.2} m°/s at τ = {:.*} s, the rate's zero alone {:.2} m°/s there)",
         f.arw_deg_rth,
         f.bias_instability_deg_h,
         f.bias_instability_deg_h * 0.664 / 3.6,
+        if f.tau_min_s < 10.0 { 2 } else { 0 },
         f.tau_min_s,
         f.zero_adev_at_min_dps * 1e3
     )
@@ -79,12 +80,7 @@ pub fn markdown(r: &Report) -> String {
             a.rate_dps,
             a.duration_s,
             a.settle_s,
-            allan_cell(&AllanFigures {
-                arw_deg_rth: a.arw_deg_rth,
-                bias_instability_deg_h: a.bias_instability_deg_h,
-                tau_min_s: a.tau_min_s,
-                zero_adev_at_min_dps: a.zero_adev_at_min_dps,
-            })
+            allan_cell(&a.figures)
         );
         if let Some(f) = &a.from_start_up {
             let _ = writeln!(
