@@ -432,10 +432,11 @@ pub struct SavePolicy {
 
 impl SavePolicy {
     /// The stm32f405 board's policy at 500 Hz: settled for 5 s, then the first save of
-    /// the run; then after each retune (once settled again) but at most every 10 min,
-    /// and every hour regardless; 8 bytes programmed per tick (a 224-byte record in 28
-    /// ticks; firmware/docs/notes.md "Warm start on the stm32f405 board" has the timing
-    /// and the write budget).
+    /// the run; the second 10 min later (the rate's zero has then learned for the 600 s
+    /// a warm start counts it as, core `rate::ZERO_RESTORE_S`); then after each retune
+    /// (once settled again) but at most every 10 min, and every hour regardless; 8 bytes
+    /// programmed per tick (a 224-byte record in 28 ticks; firmware/docs/notes.md "Warm
+    /// start on the stm32f405 board" has the timing and the write budget).
     pub const BOARD: SavePolicy = SavePolicy {
         hold_ticks: 5 * 500,
         min_interval_ticks: 10 * 60 * 500,
@@ -509,8 +510,11 @@ impl Saver {
             None => true,
             Some(last) => {
                 let age = now.wrapping_sub(last);
-                (retunes != self.retunes_at_save && age >= self.policy.min_interval_ticks)
-                    || age >= self.policy.refresh_ticks
+                // until the run has two records, a save every `min_interval_ticks` too:
+                // the first is taken 5 s after the settle, when the rate's zero has
+                // hardly learned, and a warm start carries that zero
+                let news = retunes != self.retunes_at_save || self.written < 2;
+                (news && age >= self.policy.min_interval_ticks) || age >= self.policy.refresh_ticks
             }
         }
     }

@@ -377,7 +377,7 @@ fn health(settled: bool) -> Health {
 }
 
 #[test]
-fn the_policy_saves_after_the_hold_then_after_retunes_and_on_refresh() {
+fn the_policy_saves_after_the_hold_then_once_more_then_after_retunes_and_on_refresh() {
     let p = SavePolicy {
         hold_ticks: 100,
         min_interval_ticks: 1000,
@@ -398,10 +398,17 @@ fn the_policy_saves_after_the_hold_then_after_retunes_and_on_refresh() {
     let mut unsettled_gated = health(true);
     unsettled_gated.gated = true;
     assert!(!sv.due(211, &unsettled_gated, 0), "not actionable");
+    // until the run has two records, one per minimum interval without a retune (the
+    // first is taken before the rate's zero has learned)
     sv.settled_since = Some(0);
+    sv.last_save = Some(211);
+    sv.written = 1;
+    assert!(!sv.due(1210, &health(true), 0));
+    assert!(sv.due(1211, &health(true), 0), "the run's second record");
     sv.last_save = Some(300);
+    sv.written = 2;
     sv.retunes_at_save = 0;
-    assert!(!sv.due(1000, &health(true), 0), "nothing new");
+    assert!(!sv.due(1300, &health(true), 0), "nothing new");
     assert!(
         !sv.due(1000, &health(true), 1),
         "retune within the minimum interval"
