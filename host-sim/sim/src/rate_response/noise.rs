@@ -153,10 +153,10 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
     };
     let after_warm_start = if o.allan_warm_start {
         let y = match o.precision {
-            Precision::F32 => warm_record::<f32>(&sc, o.seed, settle, duration_s)?,
-            Precision::F64 => warm_record::<f64>(&sc, o.seed, settle, duration_s)?,
+            Precision::F32 => warm_run::<f32>(&sc, o.seed, settle, duration_s)?,
+            Precision::F64 => warm_run::<f64>(&sc, o.seed, settle, duration_s)?,
         };
-        Some(curves(&y)?.figures)
+        Some(curves(&y.from(T0_S, duration_s))?.figures)
     } else {
         None
     };
@@ -197,19 +197,19 @@ impl StaticRun {
     }
 
     /// The two records over `duration_s` from `from` s.
-    fn from(&self, from: f64, duration_s: f64) -> Record {
+    fn from(&self, from: f64, duration_s: f64) -> Record<'_> {
         let r = self.span(from, duration_s);
         Record {
-            rate: self.rate[r.clone()].to_vec(),
-            zero: self.zero[r].to_vec(),
+            rate: &self.rate[r.clone()],
+            zero: &self.zero[r],
         }
     }
 }
 
 /// A record of the fast rate and, beside it, the rate's zero as a rate (°/s).
-struct Record {
-    rate: Vec<f64>,
-    zero: Vec<f64>,
+struct Record<'a> {
+    rate: &'a [f64],
+    zero: &'a [f64],
 }
 
 /// °/s of rate per unit of the zero μxy: the rate is γ·ω0 with γ = −(θ24 + μxy)/2.
@@ -233,10 +233,10 @@ fn cold_run<T: Real>(sc: &Scenario, seed: u64) -> Result<StaticRun> {
     Ok(run)
 }
 
-/// The fast rate and its zero over `duration_s` from `T0_S` after a warm start: the
-/// device run cold for `T0_S + settle` s (seed `seed`), its snapshot, a second boot of it
-/// (seed `seed + 1`) started from the snapshot.
-fn warm_record<T: Real>(sc: &Scenario, seed: u64, settle: f64, duration_s: f64) -> Result<Record> {
+/// The run after a warm start, `T0_S + duration_s` long: the device run cold for
+/// `T0_S + settle` s (seed `seed`), its snapshot, a second boot of it (seed `seed + 1`)
+/// started from the snapshot; the fast rate and its zero every sample.
+fn warm_run<T: Real>(sc: &Scenario, seed: u64, settle: f64, duration_s: f64) -> Result<StaticRun> {
     let mut cold_sc = sc.clone();
     cold_sc.duration_s = T0_S + settle;
     let mut cold = build::<T>(sc)?;
@@ -258,7 +258,7 @@ fn warm_record<T: Real>(sc: &Scenario, seed: u64, settle: f64, duration_s: f64) 
         |_| {},
         |ls| run.push(ls, k),
     )?;
-    Ok(run.from(T0_S, duration_s))
+    Ok(run)
 }
 
 /// A record's Allan curves: the fast rate's and its zero's, and the rate's figures.
@@ -273,8 +273,8 @@ struct Curves {
 /// point nearest τ = 1 s, as white rate noise σ = N/√τ), its bias instability (the
 /// curve's minimum / 0.664) and, at the minimum's τ, the zero's own deviation.
 fn curves(rec: &Record) -> Result<Curves> {
-    let (tau_s, adev_dps) = adev(&rec.rate)?;
-    let (_, zero_adev_dps) = adev(&rec.zero)?;
+    let (tau_s, adev_dps) = adev(rec.rate)?;
+    let (_, zero_adev_dps) = adev(rec.zero)?;
     // white rate noise: σ(τ) = N/√τ; N from the point nearest τ = 1 s
     let i1 = tau_s
         .iter()
