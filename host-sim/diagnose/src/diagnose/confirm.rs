@@ -459,7 +459,14 @@ fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
     // model's error moves fast where a large effect is missing from it, which inflates ν²
     // (a force leak at 7e-4: 9.5 for a noise near 1) and would make this test lenient
     let nu2_e = match &rows_e.before_sim {
-        Some(sim) => resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, e1)?.min(nu2),
+        Some(sim) => resim::noise_energy_ratio(
+            rec,
+            sim,
+            spans.first..spans.last + 1,
+            &rows_e.reproduced,
+            e1,
+        )?
+        .min(nu2),
         None => nu2,
     };
     Ok(rules(inp, &e_c, nu2_e))

@@ -458,6 +458,9 @@ pub(crate) fn calibration(
             ));
         }
     }
+    if let Some(why) = rows.regrowths_left_out() {
+        limits.push(report::Limitation::new("regrowth", why));
+    }
     // the steps beyond the usual ones were the confirmation's
     opts_cal.confirm_runs = opts
         .confirm_runs
@@ -511,7 +514,13 @@ fn noise_levels(
 ) -> (f64, [f64; NR]) {
     let nu2 = match &rows.before_sim {
         Some(sim) => {
-            match resim::noise_energy_ratio(rec, sim, spans.first..spans.last + 1, e1) {
+            match resim::noise_energy_ratio(
+                rec,
+                sim,
+                spans.first..spans.last + 1,
+                &rows.reproduced,
+                e1,
+            ) {
                 Ok(v) if v.is_finite() && v > 0.0 => v,
                 Ok(v) => {
                     limits.push(report::Limitation::new(

@@ -208,10 +208,13 @@ pub fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
 /// samples, its second difference even less; the noise does) over the same for 1 pm/√Hz white displacement noise through
 /// the record's lock-in (`e1`, [`lockin_noise_diff_energy`] of the record); the median over
 /// the ten channels (a structural error that does move fast lives on a few channels).
+/// Samples `keep` marks false (a drive regrowth the re-simulation does not reproduce,
+/// [`super::rows::Rows::reproduced`]) are left out, as are non-finite ones.
 pub fn noise_energy_ratio(
     rec: &Record,
     sim: &[LockinOut],
     span: std::ops::Range<usize>,
+    keep: &[bool],
     e1: &[f64; 10],
 ) -> anyhow::Result<f64> {
     let l0 = rec.header.l0_um;
@@ -223,7 +226,7 @@ pub fn noise_energy_ratio(
     let (mut p2, mut p1): (Option<[f64; 10]>, Option<[f64; 10]>) = (None, None);
     for k in span {
         let e = err(k);
-        if e.iter().all(|v| v.is_finite()) {
+        if keep.get(k).copied().unwrap_or(true) && e.iter().all(|v| v.is_finite()) {
             if let (Some(a), Some(b)) = (p2, p1) {
                 for c in 0..10 {
                     dd[c] += (e[c] - 2.0 * b[c] + a[c]).powi(2);

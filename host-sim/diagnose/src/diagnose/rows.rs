@@ -190,6 +190,103 @@ pub fn first_pump_hz(rec: &Record) -> f64 {
         .unwrap_or(0.0)
 }
 
+/// A drive collapse: the drive's 1st harmonic below this share of its working amplitude
+/// (the 90th percentile of the record's) in the record or in the re-simulation.
+pub const COLLAPSE_SHARE: f64 = 0.01;
+
+/// An excursion the re-simulation does not reproduce: somewhere between a collapse and the
+/// next, the record's and the re-simulation's drive 1st harmonic (complex) differ by more
+/// than this share of the working amplitude.
+pub const REGROWTH_MISMATCH: f64 = 0.2;
+
+/// The samples the re-simulation reproduces, from the drive's 1st harmonic of the record
+/// (`rec`) and of the re-simulation (`sim`), each (in-phase, quadrature) per sample. The
+/// drive between two collapses ([`COLLAPSE_SHARE`]) is one excursion; where the two differ
+/// somewhere in it by more than [`REGROWTH_MISMATCH`] of the working amplitude, its
+/// samples are false from its collapse through the end of the next (or to the record's
+/// end). Collapses count once the record's drive has first reached half its working
+/// amplitude (the start from rest is the model's).
+///
+/// Out of its parametric band the drive rings down to the floor of what drives it, and
+/// how and when it grows back (with one of two phases, 0 or π against the half pump) is
+/// set by that floor: in a device its thermomechanical noise, in a simulator the forcing's
+/// smallest terms and the integrator's; near the band's edge, where it leaves the band
+/// again, the trajectory turns on the parameters' last digits. The model cannot reproduce
+/// such an excursion from the record's inputs, and one that grows at another time or with
+/// the other sign leaves a gap no effect explains (a clean device of the independent
+/// generator: 163× its noise; host-sim/diagnose/docs/notes.md, "Drive excursions the
+/// re-simulation does not reproduce"). Every sample is kept when no excursion departs so
+/// far.
+pub(crate) fn unreproduced_regrowths(rec: &[(f64, f64)], sim: &[(f64, f64)]) -> Vec<bool> {
+    let n = rec.len().min(sim.len());
+    let mut keep = vec![true; rec.len()];
+    let amp = |v: (f64, f64)| v.0.hypot(v.1);
+    let mut a: Vec<f64> = rec[..n]
+        .iter()
+        .map(|v| amp(*v))
+        .filter(|v| v.is_finite())
+        .collect();
+    if a.is_empty() {
+        return keep;
+    }
+    a.sort_by(f64::total_cmp);
+    let working = a[(a.len() - 1) * 9 / 10];
+    if working <= 0.0 {
+        return keep;
+    }
+    let low = COLLAPSE_SHARE * working;
+    let collapsed = |k: usize| amp(rec[k]) < low || amp(sim[k]) < low;
+    // collapses once the drive has built up (its start from rest is the model's)
+    let Some(up) = (0..n).find(|&k| amp(rec[k]) >= 0.5 * working) else {
+        return keep;
+    };
+    // the first sample of each collapse, and the record's end
+    let mut starts: Vec<usize> = (up..n)
+        .filter(|&k| collapsed(k) && (k == 0 || !collapsed(k - 1)))
+        .collect();
+    starts.push(n);
+    let apart =
+        |k: usize| (rec[k].0 - sim[k].0).hypot(rec[k].1 - sim[k].1) > REGROWTH_MISMATCH * working;
+    for w in starts.windows(2) {
+        let (k0, k1) = (w[0], w[1]);
+        if (k0..k1).any(apart) {
+            // through the next collapse: the excursion's tail decays into it
+            let end = (k1..n).find(|&k| !collapsed(k)).unwrap_or(n);
+            keep[k0..end].fill(false);
+        }
+    }
+    keep
+}
+
+/// The samples `keep` leaves out (times `t`, sample rate `fs`), said in a report's
+/// limitation: their time and share of the record, and their spans (the first three);
+/// `None` when none is.
+pub(crate) fn left_out_note(keep: &[bool], t: &[f64], fs: f64) -> Option<String> {
+    let n = keep.len().min(t.len());
+    let out = keep[..n].iter().filter(|&&k| !k).count();
+    if out == 0 {
+        return None;
+    }
+    let mut spans: Vec<String> = Vec::new();
+    for k in 0..n {
+        if !keep[k] && (k == 0 || keep[k - 1]) {
+            let end = (k..n).find(|&j| keep[j]).unwrap_or(n);
+            spans.push(format!("{:.2}–{:.2} s", t[k], t[end - 1] + 1.0 / fs));
+        }
+    }
+    let more = match spans.len() {
+        0..=3 => String::new(),
+        m => format!(" and {} more", m - 3),
+    };
+    spans.truncate(3);
+    Some(format!(
+        "{:.2} s of the record ({:.1} %) left out of the rows and the noise level: drive excursions after a collapse that the re-simulation does not reproduce ({}{more}); the gap is judged on the rest",
+        out as f64 / fs,
+        100.0 * out as f64 / n as f64,
+        spans.join(", ")
+    ))
+}
+
 /// The gap in regression form, and what the later stages need of the record.
 pub(crate) struct Rows {
     /// Sample times, s.
@@ -220,6 +317,10 @@ pub(crate) struct Rows {
     pub y: Vec<[f64; NR]>,
     /// Samples whose rows count.
     pub usable: Vec<bool>,
+    /// Samples the re-simulation reproduces: false in a drive regrowth it does not
+    /// ([`unreproduced_regrowths`]); every sample without the re-simulation. The rows
+    /// ([`Rows::usable`]) and the record's noise level leave the others out.
+    pub reproduced: Vec<bool>,
     /// The rate column: dθ14/dγ = 2, dθ24/dγ = −2.
     pub gamma_col: Vec<[f64; NR]>,
     /// The simulator's lock-in outputs on the record's inputs (with the re-simulation).
@@ -306,6 +407,7 @@ impl Rows {
         let mut rows = Rows {
             y: base.y.clone(),
             usable: base.usable.clone(),
+            reproduced: vec![true; n],
             gamma_sim: None,
             t,
             fs,
@@ -328,6 +430,12 @@ impl Rows {
             None => rows.subtract_simulator(rec, opts, effects, vib_phase0, timing)?,
         }
         Ok(rows)
+    }
+
+    /// What [`Rows::reproduced`] left out, said in a report's limitation
+    /// ([`left_out_note`]).
+    pub(crate) fn regrowths_left_out(&self) -> Option<String> {
+        left_out_note(&self.reproduced, &self.t, self.fs)
     }
 
     /// The 14 weighted θ columns of the model's pass, each as one column (per sample, 10
@@ -369,11 +477,15 @@ impl Rows {
 
     /// Subtracts the simulator's rows (its pass `ps` on its lock-in outputs `sim`).
     fn subtract_simulated(&mut self, sim: Vec<LockinOut>, ps: &Pass) {
+        let drive = |p: &Pass| -> Vec<(f64, f64)> {
+            p.env.iter().map(|e| (e.a[0].re, e.a[0].im)).collect()
+        };
+        self.reproduced = unreproduced_regrowths(&drive(&self.base), &drive(ps));
         for (k, y) in self.y.iter_mut().enumerate() {
             for r in 0..NR {
                 y[r] -= ps.y[k][r];
             }
-            self.usable[k] &= ps.usable[k];
+            self.usable[k] &= ps.usable[k] && self.reproduced[k];
         }
         self.before_sim = Some(sim);
     }
@@ -465,5 +577,96 @@ impl Spans {
             fit_blocks,
             hold: hold_start..last + 1,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{left_out_note, unreproduced_regrowths};
+
+    /// A drive of amplitude 2 (phase 0) that collapses to 1e-6 of it over `troughs`
+    /// (sample ranges) and regrows; `burst` adds, at those samples, a burst of amplitude
+    /// 1.5 that the other trace does not have.
+    fn drive(
+        n: usize,
+        troughs: &[(usize, usize)],
+        burst: Option<(usize, usize)>,
+    ) -> Vec<(f64, f64)> {
+        (0..n)
+            .map(|k| {
+                let mut a = if k < 50 { 0.0 } else { 2.0 };
+                if troughs.iter().any(|&(a0, a1)| (a0..a1).contains(&k)) {
+                    a = 2e-6;
+                }
+                if burst.is_some_and(|(b0, b1)| (b0..b1).contains(&k)) {
+                    a = 1.5;
+                }
+                (a, 0.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_regrowth_the_model_reproduces_keeps_every_sample() {
+        let rec = drive(2000, &[(400, 600), (1200, 1300)], None);
+        assert!(unreproduced_regrowths(&rec, &rec).iter().all(|&k| k));
+        // the start from rest is the model's: a mismatch before the drive first builds up
+        // is not a regrowth
+        let mut sim = rec.clone();
+        sim[10] = (1.9, 0.0);
+        assert!(unreproduced_regrowths(&rec, &sim).iter().all(|&k| k));
+    }
+
+    #[test]
+    fn a_burst_at_another_time_drops_its_excursion_through_the_next_collapse() {
+        let troughs = [(400, 600), (900, 1000), (1400, 1500)];
+        // the record's second trough holds a burst the re-simulation does not have
+        let rec = drive(2000, &troughs, Some((940, 960)));
+        let sim = drive(2000, &troughs, None);
+        let keep = unreproduced_regrowths(&rec, &sim);
+        // from the collapse the burst comes in (900) through the next one's end (1500)
+        assert!(keep[..900].iter().all(|&k| k));
+        assert!(keep[900..1500].iter().all(|&k| !k));
+        assert!(keep[1500..].iter().all(|&k| k));
+    }
+
+    #[test]
+    fn a_regrowth_with_the_other_sign_drops_the_rest_of_the_record() {
+        // after the trough the drive grows back at phase π in the record, 0 in the model:
+        // the same amplitude, the opposite sign, until the record ends
+        let sim = drive(2000, &[(400, 600)], None);
+        let rec: Vec<(f64, f64)> = sim
+            .iter()
+            .enumerate()
+            .map(|(k, v)| if k >= 600 { (-v.0, v.1) } else { *v })
+            .collect();
+        let keep = unreproduced_regrowths(&rec, &sim);
+        assert!(keep[..400].iter().all(|&k| k));
+        assert!(keep[400..].iter().all(|&k| !k));
+    }
+
+    #[test]
+    fn a_few_percent_of_amplitude_after_a_regrowth_is_kept() {
+        // a difference of 3 % of the drive is a gap to explain, not an excursion the
+        // model misses
+        let sim = drive(2000, &[(400, 600)], None);
+        let rec: Vec<(f64, f64)> = sim.iter().map(|v| (v.0 * 1.03, v.1)).collect();
+        assert!(unreproduced_regrowths(&rec, &sim).iter().all(|&k| k));
+    }
+
+    #[test]
+    fn what_is_left_out_is_said_with_its_time_share_and_spans() {
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 / 500.0).collect();
+        assert_eq!(left_out_note(&[true; 1000], &t, 500.0), None);
+        let mut keep = vec![true; 1000];
+        for r in [100..200, 300..310, 400..450, 500..505, 990..1000] {
+            keep[r].fill(false);
+        }
+        let note = left_out_note(&keep, &t, 500.0).unwrap();
+        assert!(
+            note.starts_with("0.35 s of the record (17.5 %) left out")
+                && note.contains("(0.20–0.40 s, 0.60–0.62 s, 0.80–0.90 s and 2 more)"),
+            "{note}"
+        );
     }
 }
