@@ -38,6 +38,11 @@ pub struct DiagnoseOpts {
     /// off).
     #[arg(long, value_name = "N", default_value_t = paragyro_diagnose::diagnose::confirm::CONFIRM_RUNS)]
     pub confirm_runs: usize,
+    /// Leave the drive's excursions the re-simulation does not reproduce (a regrowth after
+    /// a collapse, set by the drive's noise floor) out of the rows and the noise estimate;
+    /// by default they are kept and named in the report's limitations.
+    #[arg(long)]
+    pub leave_out_excursions: bool,
 }
 
 impl DiagnoseOpts {
@@ -46,6 +51,7 @@ impl DiagnoseOpts {
         let mut opts = Options {
             resimulate: !self.no_resim,
             confirm_runs: self.confirm_runs,
+            leave_out_excursions: self.leave_out_excursions,
             ..Default::default()
         };
         if let Some(m) = &self.model {

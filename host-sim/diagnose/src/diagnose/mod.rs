@@ -288,6 +288,10 @@ pub struct Options {
     /// Calibration steps at most ([`CALIBRATION_MAX_RESIMULATIONS`] by default; at most
     /// [`CALIBRATION_RESIMULATIONS`] leaves the whole budget to the confirmation).
     pub calibration_steps: usize,
+    /// Leave the drive excursions the re-simulation does not reproduce out of the rows
+    /// and the noise estimate (`rows::unreproduced_regrowths`); off by default, when
+    /// they are only said (limitation `regrowth`).
+    pub leave_out_excursions: bool,
 }
 
 impl Default for Options {
@@ -298,6 +302,7 @@ impl Default for Options {
             steps_per_period: 128,
             confirm_runs: confirm::CONFIRM_RUNS,
             calibration_steps: CALIBRATION_MAX_RESIMULATIONS,
+            leave_out_excursions: false,
         }
     }
 }

@@ -209,7 +209,7 @@ pub fn lockin_noise_diff_energy(rec: &Record) -> anyhow::Result<[f64; 10]> {
 /// the record's lock-in (`e1`, [`lockin_noise_diff_energy`] of the record); the median over
 /// the ten channels (a structural error that does move fast lives on a few channels).
 /// Samples `keep` marks false (a drive regrowth the re-simulation does not reproduce,
-/// [`super::rows::Rows::reproduced`]) are left out, as are non-finite ones.
+/// the rows' `reproduced`) are left out, as are non-finite ones.
 pub fn noise_energy_ratio(
     rec: &Record,
     sim: &[LockinOut],

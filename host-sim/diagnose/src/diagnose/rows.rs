@@ -286,10 +286,9 @@ pub(crate) fn unreproduced_regrowths(rec: &[(f64, f64)], sim: &[(f64, f64)]) -> 
     keep
 }
 
-/// The samples `keep` leaves out (times `t`, sample rate `fs`), said in a report's
-/// limitation: their time and share of the record, and their spans (the first three);
-/// `None` when none is.
-pub(crate) fn left_out_note(keep: &[bool], t: &[f64], fs: f64) -> Option<String> {
+/// The time, share and spans (the first three) of the samples `keep` marks false (times
+/// `t`, sample rate `fs`); `None` when none is.
+fn false_spans(keep: &[bool], t: &[f64], fs: f64) -> Option<(f64, f64, String)> {
     let n = keep.len().min(t.len());
     let out = keep[..n].iter().filter(|&&k| !k).count();
     if out == 0 {
@@ -307,12 +306,32 @@ pub(crate) fn left_out_note(keep: &[bool], t: &[f64], fs: f64) -> Option<String>
         m => format!(" and {} more", m - 3),
     };
     spans.truncate(3);
-    Some(format!(
-        "{:.2} s of the record ({:.1} %) left out of the rows and the noise level: drive excursions after a collapse that the re-simulation does not reproduce ({}{more}); the gap is judged on the rest",
+    Some((
         out as f64 / fs,
         100.0 * out as f64 / n as f64,
-        spans.join(", ")
+        format!("{}{more}", spans.join(", ")),
     ))
+}
+
+/// The samples `keep` leaves out (times `t`, sample rate `fs`), said in a report's
+/// limitation: their time and share of the record, and their spans (the first three);
+/// `None` when none is.
+pub(crate) fn left_out_note(keep: &[bool], t: &[f64], fs: f64) -> Option<String> {
+    false_spans(keep, t, fs).map(|(secs, pct, spans)| {
+        format!(
+            "{secs:.2} s of the record ({pct:.1} %) left out of the rows and the noise level: drive excursions after a collapse that the re-simulation does not reproduce ({spans}); the gap is judged on the rest"
+        )
+    })
+}
+
+/// The drive excursions the re-simulation does not reproduce (`excursions` false), kept
+/// in the rows, said in a report's limitation; `None` when there is none.
+pub(crate) fn excursions_note(excursions: &[bool], t: &[f64], fs: f64) -> Option<String> {
+    false_spans(excursions, t, fs).map(|(secs, pct, spans)| {
+        format!(
+            "the re-simulation does not reproduce the drive's excursions after a collapse over {secs:.2} s of the record ({pct:.1} %: {spans}): a gap there can be the regrowth's, set by the drive's noise floor, not an effect; `--leave-out-excursions` judges the rest"
+        )
+    })
 }
 
 /// The gap in regression form, and what the later stages need of the record.
@@ -345,9 +364,11 @@ pub(crate) struct Rows {
     pub y: Vec<[f64; NR]>,
     /// Samples whose rows count.
     pub usable: Vec<bool>,
-    /// Samples the re-simulation reproduces: false in a drive regrowth it does not
-    /// ([`unreproduced_regrowths`]); every sample without the re-simulation. The rows
-    /// ([`Rows::usable`]) and the record's noise level leave the others out.
+    /// Samples the re-simulation reproduces: false in a drive excursion it does not
+    /// ([`unreproduced_regrowths`]); every sample without the re-simulation.
+    pub excursions: Vec<bool>,
+    /// The samples the rows ([`Rows::usable`]) and the record's noise level keep:
+    /// [`Rows::excursions`] with [`Options::leave_out_excursions`], every one without.
     pub reproduced: Vec<bool>,
     /// The rate column: dθ14/dγ = 2, dθ24/dγ = −2.
     pub gamma_col: Vec<[f64; NR]>,
@@ -435,6 +456,7 @@ impl Rows {
         let mut rows = Rows {
             y: base.y.clone(),
             usable: base.usable.clone(),
+            excursions: vec![true; n],
             reproduced: vec![true; n],
             gamma_sim: None,
             t,
@@ -454,16 +476,17 @@ impl Rows {
         rows.gamma_sim = rows.rate_ref.is_none().then(|| rows.fitted_rate());
         timing.tick("rows");
         match early {
-            Some((sim, ps)) => rows.subtract_simulated(sim, &ps),
+            Some((sim, ps)) => rows.subtract_simulated(sim, &ps, opts.leave_out_excursions),
             None => rows.subtract_simulator(rec, opts, effects, vib_phase0, timing)?,
         }
         Ok(rows)
     }
 
-    /// What [`Rows::reproduced`] left out, said in a report's limitation
-    /// ([`left_out_note`]).
+    /// What [`Rows::reproduced`] left out, or the excursions the re-simulation does not
+    /// reproduce when nothing was, said in a report's limitation ([`left_out_note`]).
     pub(crate) fn regrowths_left_out(&self) -> Option<String> {
         left_out_note(&self.reproduced, &self.t, self.fs)
+            .or_else(|| excursions_note(&self.excursions, &self.t, self.fs))
     }
 
     /// The 14 weighted θ columns of the model's pass, each as one column (per sample, 10
@@ -504,11 +527,14 @@ impl Rows {
     }
 
     /// Subtracts the simulator's rows (its pass `ps` on its lock-in outputs `sim`).
-    fn subtract_simulated(&mut self, sim: Vec<LockinOut>, ps: &Pass) {
+    fn subtract_simulated(&mut self, sim: Vec<LockinOut>, ps: &Pass, leave_out: bool) {
         let drive = |p: &Pass| -> Vec<(f64, f64)> {
             p.env.iter().map(|e| (e.a[0].re, e.a[0].im)).collect()
         };
-        self.reproduced = unreproduced_regrowths(&drive(&self.base), &drive(ps));
+        self.excursions = unreproduced_regrowths(&drive(&self.base), &drive(ps));
+        if leave_out {
+            self.reproduced = self.excursions.clone();
+        }
         for (k, y) in self.y.iter_mut().enumerate() {
             for r in 0..NR {
                 y[r] -= ps.y[k][r];
@@ -541,7 +567,7 @@ impl Rows {
             );
             let sim = resim.run(0..n)?;
             let ps = run_pass(&with_lockin(rec, &sim), &self.cfg, &|_, _| {})?;
-            self.subtract_simulated(sim, &ps);
+            self.subtract_simulated(sim, &ps, opts.leave_out_excursions);
             timing.tick(resim_stage(effects));
         } else if let Some(rr) = &self.rate_ref {
             for k in 0..n {
@@ -610,7 +636,7 @@ impl Spans {
 
 #[cfg(test)]
 mod tests {
-    use super::{left_out_note, unreproduced_regrowths};
+    use super::{excursions_note, left_out_note, unreproduced_regrowths};
 
     /// A drive of amplitude 2 (phase 0) that collapses to 1e-6 of it over `troughs`
     /// (sample ranges) and regrows; `burst` adds, at those samples, a burst of amplitude
@@ -718,5 +744,12 @@ mod tests {
                 && note.contains("(0.20–0.40 s, 0.60–0.62 s, 0.80–0.90 s and 2 more)"),
             "{note}"
         );
+        let kept = excursions_note(&keep, &t, 500.0).unwrap();
+        assert!(
+            kept.contains("over 0.35 s of the record (17.5 %: 0.20–0.40 s,")
+                && kept.contains("`--leave-out-excursions`"),
+            "{kept}"
+        );
+        assert_eq!(excursions_note(&[true; 1000], &t, 500.0), None);
     }
 }
