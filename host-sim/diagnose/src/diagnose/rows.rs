@@ -214,8 +214,9 @@ pub const REGROWTH_MAX_SHARE: f64 = 1.0 / 3.0;
 /// drive between two collapses ([`COLLAPSE_SHARE`]) is one excursion; where the two differ
 /// somewhere in it by more than [`REGROWTH_MISMATCH`] of the working amplitude, its
 /// samples are false from its collapse through the end of the next (or to the record's
-/// end), when that is so on at most [`REGROWTH_MAX_SHARE`] of the excursions. Collapses count once the record's drive has first reached half its working
-/// amplitude (the start from rest is the model's).
+/// end), when that is so on at most [`REGROWTH_MAX_SHARE`] of the excursions. Collapses
+/// count once the record's drive has first reached half its working amplitude (the start
+/// from rest is the model's).
 ///
 /// Out of its parametric band the drive rings down to the floor of what drives it, and
 /// how and when it grows back (with one of two phases, 0 or π against the half pump) is
