@@ -144,3 +144,37 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
     ));
     ctx.say(&text)
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    /// The options as `diagnose` and `lot` take them.
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        opts: super::DiagnoseOpts,
+    }
+
+    fn options(args: &[&str]) -> paragyro_diagnose::diagnose::Options {
+        let cli = Cli::parse_from(std::iter::once("paragyro-sim").chain(args.iter().copied()));
+        match cli.opts.options() {
+            Ok(o) => o,
+            Err(_) => panic!("options of {args:?}"),
+        }
+    }
+
+    #[test]
+    fn excursions_are_left_out_only_with_the_flag() {
+        assert!(!options(&[]).leave_out_excursions);
+        assert!(options(&["--leave-out-excursions"]).leave_out_excursions);
+        // the flag leaves the rest as it was
+        let o = options(&[
+            "--leave-out-excursions",
+            "--confirm-runs",
+            "3",
+            "--no-resim",
+        ]);
+        assert!(o.leave_out_excursions && o.confirm_runs == 3 && !o.resimulate);
+    }
+}
