@@ -463,7 +463,7 @@ pub(crate) fn calibration(
             ));
         }
     }
-    if let Some(why) = rows.regrowths_left_out() {
+    if let Some(why) = rows.regrowth_note() {
         limits.push(report::Limitation::new("regrowth", why));
     }
     // the steps beyond the usual ones were the confirmation's

@@ -485,7 +485,7 @@ impl Rows {
 
     /// What [`Rows::reproduced`] left out, or the excursions the re-simulation does not
     /// reproduce when nothing was, said in a report's limitation ([`left_out_note`]).
-    pub(crate) fn regrowths_left_out(&self) -> Option<String> {
+    pub(crate) fn regrowth_note(&self) -> Option<String> {
         left_out_note(&self.reproduced, &self.t, self.fs)
             .or_else(|| excursions_note(&self.excursions, &self.t, self.fs))
     }
@@ -637,6 +637,8 @@ impl Spans {
 
 #[cfg(test)]
 mod tests {
+    use std::ops::Range;
+
     use super::{excursions_note, left_out_note, unreproduced_regrowths};
 
     /// A drive of amplitude 2 (phase 0) that collapses to 1e-6 of it over `troughs`
@@ -661,6 +663,23 @@ mod tests {
             .collect()
     }
 
+    /// `sim` with its drive times `factor` over `samples`: the record of a model that
+    /// misses it there.
+    fn scaled(sim: &[(f64, f64)], samples: Range<usize>, factor: f64) -> Vec<(f64, f64)> {
+        let mut rec = sim.to_vec();
+        for v in &mut rec[samples] {
+            v.0 *= factor;
+        }
+        rec
+    }
+
+    /// `keep` false over `out` and true everywhere else.
+    fn left_out_exactly(keep: &[bool], out: Range<usize>) -> bool {
+        keep.iter()
+            .enumerate()
+            .all(|(k, &kept)| kept != out.contains(&k))
+    }
+
     #[test]
     fn a_regrowth_the_model_reproduces_keeps_every_sample() {
         let rec = drive(2000, &[(400, 600), (1200, 1300)], None);
@@ -680,9 +699,7 @@ mod tests {
         let sim = drive(2000, &troughs, None);
         let keep = unreproduced_regrowths(&rec, &sim);
         // from the collapse the burst comes in (900) through the next one's end (1500)
-        assert!(keep[..900].iter().all(|&k| k));
-        assert!(keep[900..1500].iter().all(|&k| !k));
-        assert!(keep[1500..].iter().all(|&k| k));
+        assert!(left_out_exactly(&keep, 900..1500));
     }
 
     #[test]
@@ -691,21 +708,9 @@ mod tests {
         // model: the same amplitude, the opposite sign, until the next collapse
         let troughs = [(400, 600), (1000, 1100), (1500, 1600)];
         let sim = drive(2000, &troughs, None);
-        let rec: Vec<(f64, f64)> = sim
-            .iter()
-            .enumerate()
-            .map(|(k, v)| {
-                if (600..1000).contains(&k) {
-                    (-v.0, v.1)
-                } else {
-                    *v
-                }
-            })
-            .collect();
+        let rec = scaled(&sim, 600..1000, -1.0);
         let keep = unreproduced_regrowths(&rec, &sim);
-        assert!(keep[..400].iter().all(|&k| k));
-        assert!(keep[400..1100].iter().all(|&k| !k));
-        assert!(keep[1100..].iter().all(|&k| k));
+        assert!(left_out_exactly(&keep, 400..1100));
     }
 
     #[test]
@@ -714,11 +719,7 @@ mod tests {
         // lacks): its gap is the diagnosis's to explain, nothing is left out
         let troughs = [(400, 600), (1000, 1100), (1500, 1600)];
         let sim = drive(2000, &troughs, None);
-        let rec: Vec<(f64, f64)> = sim
-            .iter()
-            .enumerate()
-            .map(|(k, v)| if k >= 600 { (0.75 * v.0, v.1) } else { *v })
-            .collect();
+        let rec = scaled(&sim, 600..2000, 0.75);
         assert!(unreproduced_regrowths(&rec, &sim).iter().all(|&k| k));
     }
 
@@ -727,7 +728,7 @@ mod tests {
         // a difference of 3 % of the drive is a gap to explain, not an excursion the
         // model misses
         let sim = drive(2000, &[(400, 600)], None);
-        let rec: Vec<(f64, f64)> = sim.iter().map(|v| (v.0 * 1.03, v.1)).collect();
+        let rec = scaled(&sim, 0..2000, 1.03);
         assert!(unreproduced_regrowths(&rec, &sim).iter().all(|&k| k));
     }
 
