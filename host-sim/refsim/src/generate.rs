@@ -249,6 +249,12 @@ pub struct GenOptions {
     pub rtol: f64,
     /// The share of records with a rate-table reversal.
     pub reversal_share: f64,
+    /// Writes only these of the `n` drawn records (ids, `0039`), e.g. to reproduce a record
+    /// of a scored run; labels.json then holds only them. Empty: all.
+    pub only: Vec<String>,
+    /// Writes only the drawn records of this category (a development set of one kind);
+    /// `None`: all.
+    pub category: Option<Category>,
 }
 
 /// What a run did.
@@ -294,9 +300,28 @@ pub fn generate(
         opts.reversal_share
     );
     let mut draws = draw(opts.n, opts.seed, opts.duration_s, opts.reversal_share);
+    for id in &opts.only {
+        anyhow::ensure!(
+            draws.iter().any(|d| &d.id == id),
+            "--only {id}: no such record among the {} drawn (ids 0000 to {:04})",
+            opts.n,
+            opts.n - 1
+        );
+    }
+    // the selection happens after the whole draw, so a record is the same whatever is kept
+    draws.retain(|d| {
+        (opts.only.is_empty() || opts.only.contains(&d.id))
+            && opts.category.is_none_or(|c| d.category == c)
+    });
+    anyhow::ensure!(
+        !draws.is_empty(),
+        "none of the {} drawn records is of the category asked (--category)",
+        opts.n
+    );
     for d in &mut draws {
         d.protocol.pump_amp_ref_v = opts.pump_amp_ref_v;
     }
+    let n = draws.len();
     let t0 = Instant::now();
     let done = AtomicUsize::new(0);
     let (order, hz) = opts.lpf;
@@ -311,8 +336,7 @@ pub fn generate(
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             // no truth on the progress line: the labels stay sealed until labels.json
             progress(&format!(
-                "[{k}/{}] {} ({:.1} s, {} steps)",
-                opts.n,
+                "[{k}/{n}] {} ({:.1} s, {} steps)",
                 path.display(),
                 secs,
                 s.stats.accepted
@@ -320,7 +344,7 @@ pub fn generate(
             Ok((path, secs))
         })
         .collect();
-    let mut records = Vec::with_capacity(opts.n);
+    let mut records = Vec::with_capacity(n);
     let mut cpu_seconds = 0.0;
     for r in results {
         let (p, s) = r?;

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
-use paragyro_refsim::generate::{self, GenOptions};
+use paragyro_refsim::generate::{self, Category, GenOptions};
 
 #[derive(Parser)]
 #[command(
@@ -52,7 +52,27 @@ enum Cmd {
         /// Worker threads (0: all cores).
         #[arg(long, default_value_t = 0)]
         jobs: usize,
+        /// Write only these of the N drawn records (ids, comma-separated: `0039,0079`), the
+        /// same bytes as in the full run; labels.json holds only them.
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        /// Write only the drawn records of this category (none, single, double, outside):
+        /// a development set of one kind.
+        #[arg(long, value_parser = parse_category)]
+        category: Option<Category>,
     },
+}
+
+fn parse_category(s: &str) -> Result<Category, String> {
+    match s {
+        "none" => Ok(Category::None),
+        "single" => Ok(Category::Single),
+        "double" => Ok(Category::Double),
+        "outside" => Ok(Category::Outside),
+        _ => Err(format!(
+            "`{s}` is not a category (none, single, double, outside)"
+        )),
+    }
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -68,6 +88,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             rtol,
             reversal_share,
             jobs,
+            only,
+            category,
         } => {
             anyhow::ensure!(
                 (1..=8).contains(&lpf_order),
@@ -95,6 +117,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 pump_amp_ref_v,
                 rtol,
                 reversal_share,
+                only,
+                category,
             };
             let rep = generate::generate(&opts, &out, &|m| eprintln!("{m}"))?;
             eprintln!(

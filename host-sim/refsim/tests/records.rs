@@ -22,6 +22,8 @@ fn opts(n: usize, seed: u64) -> GenOptions {
         pump_amp_ref_v: 1.0,
         rtol: 1e-9,
         reversal_share: 0.4,
+        only: Vec::new(),
+        category: None,
     }
 }
 
@@ -163,4 +165,73 @@ fn bad_options_are_clear_errors() {
     .unwrap_err();
     assert!(e.to_string().contains("--duration-s"), "{e}");
     assert!(!dir.join("labels.json").exists());
+}
+
+/// `--only` and `--category` write a subset of the same draw: each record kept is the
+/// same bytes as in the full run, labels.json holds exactly the kept ones, and an id that
+/// was not drawn is an error.
+#[test]
+fn a_selection_writes_the_full_runs_records() {
+    let (n, seed) = (8, 11);
+    let full = out_dir("sel-full");
+    gen_into(&full, n, seed);
+    let all = draw(n, seed, 0.4, 0.4);
+    let labels_of = |dir: &Path| -> Labels {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("labels.json")).unwrap()).unwrap()
+    };
+    let same_bytes = |dir: &Path, id: &str| {
+        let name = format!("{id}.csv");
+        std::fs::read(dir.join(&name)).unwrap() == std::fs::read(full.join(&name)).unwrap()
+    };
+
+    let only = out_dir("sel-only");
+    let ids = vec!["0006".to_string(), "0002".to_string()];
+    let rep = generate(
+        &GenOptions {
+            only: ids.clone(),
+            ..opts(n, seed)
+        },
+        &only,
+        &|_| {},
+    )
+    .unwrap();
+    assert_eq!(rep.records.len(), 2);
+    let kept: Vec<String> = labels_of(&only).records.into_iter().map(|d| d.id).collect();
+    assert_eq!(kept, ["0002", "0006"]);
+    assert!(ids.iter().all(|id| same_bytes(&only, id)));
+    assert!(!only.join("0000.csv").exists());
+
+    let cat = all[0].category;
+    let by_cat = out_dir("sel-cat");
+    generate(
+        &GenOptions {
+            category: Some(cat),
+            ..opts(n, seed)
+        },
+        &by_cat,
+        &|_| {},
+    )
+    .unwrap();
+    let want: Vec<&str> = all
+        .iter()
+        .filter(|d| d.category == cat)
+        .map(|d| d.id.as_str())
+        .collect();
+    let got = labels_of(&by_cat).records;
+    assert_eq!(got.iter().map(|d| d.id.as_str()).collect::<Vec<_>>(), want);
+    assert!(want.iter().all(|id| same_bytes(&by_cat, id)));
+
+    let e = generate(
+        &GenOptions {
+            only: vec!["0008".into()],
+            ..opts(n, seed)
+        },
+        &out_dir("sel-bad"),
+        &|_| {},
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("--only 0008"), "{e}");
+    for d in [full, only, by_cat] {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }
