@@ -402,9 +402,8 @@ fn a_calibration_that_has_not_converged_takes_the_confirmations_runs() {
 /// among the candidates that close [`SHARE_MIN`] of the explainable gap. The one that does,
 /// a thermal drift, is re-simulated first and rejected; the confirmation's second place
 /// then goes to the most significant of the rest, the nonlinearity, whose run brings the
-/// record to its noise (re-simulating the thermal drift alone would read `unknown`; with
-/// the nonlinearity fitted about its run it passes as a pair, which a single passing
-/// candidate comes before).
+/// record to its noise (the thermal drift's run, with the nonlinearity fitted linearly about
+/// it, leaves the record far above its noise: not a pair, `CONFIRM_NOISE_MAX`).
 #[test]
 fn a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation() {
     let sc0 = Scenario::load("characterise").unwrap();
@@ -433,16 +432,10 @@ fn a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation(
         .collect();
     assert_eq!(tested, ["thermal_drift", "geometric_nonlinearity"]);
     assert!(!r.confirmation[0].confirmed, "{:?}", r.confirmation[0]);
-    // the thermal drift's run with the nonlinearity fitted about it passes as a pair; a
-    // candidate that passes alone is the verdict before any pair
-    assert!(
-        r.confirmation[0]
-            .with
-            .as_ref()
-            .is_some_and(|p| p.effect.starts_with("geometric_nonlinearity")),
-        "{:?}",
-        r.confirmation[0]
-    );
+    // the thermal drift's run (1 285× the noise) with the nonlinearity fitted linearly
+    // about it leaves a small share of that gap, but not the record at its noise: no pair
+    // (the record holds no thermal drift), and the nonlinearity's own run is the verdict
+    assert!(r.confirmation[0].with.is_none(), "{:?}", r.confirmation[0]);
     assert!(r.verdict.secondary().is_none(), "{:?}", r.verdict);
     let c = &r.confirmation[1];
     assert!(c.confirmed && c.residual_over_noise < 1.1, "{c:?}");

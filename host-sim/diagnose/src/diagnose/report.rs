@@ -22,9 +22,9 @@ use super::rank::Fits;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Verdict};
 use super::{
-    COHERENT, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options, ROW_GAP_MIN,
-    ROW_GAP_SHARE, ROW_LABELS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG, UNEXPLAINED_MAX,
-    VIB_BEAT_MAX_HZ,
+    COHERENT, CONFIRM_NOISE_MAX, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options,
+    ROW_GAP_MIN, ROW_GAP_SHARE, ROW_LABELS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG,
+    UNEXPLAINED_MAX, VIB_BEAT_MAX_HZ,
 };
 
 /// The format tag of report.json (3: format 2's keys and `confirmation`).
@@ -127,6 +127,7 @@ pub struct Thresholds {
     pub row_gap_share: f64,
     pub row_gap_min: f64,
     pub row_unexplained_max: f64,
+    pub confirm_noise_max: f64,
 }
 
 impl Thresholds {
@@ -144,6 +145,7 @@ impl Thresholds {
             row_gap_share: ROW_GAP_SHARE,
             row_gap_min: ROW_GAP_MIN,
             row_unexplained_max: ROW_UNEXPLAINED_MAX,
+            confirm_noise_max: CONFIRM_NOISE_MAX,
         }
     }
 }
