@@ -63,16 +63,10 @@ enum Cmd {
     },
 }
 
+/// A category by its labels.json name (`Category`'s serde names).
 fn parse_category(s: &str) -> Result<Category, String> {
-    match s {
-        "none" => Ok(Category::None),
-        "single" => Ok(Category::Single),
-        "double" => Ok(Category::Double),
-        "outside" => Ok(Category::Outside),
-        _ => Err(format!(
-            "`{s}` is not a category (none, single, double, outside)"
-        )),
-    }
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("`{s}` is not a category (none, single, double, outside)"))
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
