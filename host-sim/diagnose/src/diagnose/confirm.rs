@@ -562,6 +562,33 @@ pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {
     !passed && unexplained > HOPELESS_UNEXPLAINED && size * (size + delta) < 0.0
 }
 
+/// A Gauss–Newton step on the effect being confirmed: its size's change along the size
+/// (what [`hopeless`] reads), the step's length (what [`converged`] reads; the two differ
+/// only for the vibration, whose step also turns its phase), and the size and the
+/// vibration's phase after it.
+#[derive(Debug, Clone, Copy)]
+struct EffectStep {
+    along: f64,
+    length: f64,
+    size: f64,
+    phase: f64,
+}
+
+/// The angular vibration's step: its in-phase and quadrature coefficients (γ, the columns'
+/// `γ = gr·sin θ + gi·cos θ`) move by `(dr, di)` from the amplitude `size` (°/s) at
+/// `phase` (`gr = size·gpd·cos φ`, `gi = size·gpd·sin φ`; `gpd`: γ per °/s).
+fn vibration_step(size: f64, phase: f64, gpd: f64, dr: f64, di: f64) -> EffectStep {
+    let (s, c) = phase.sin_cos();
+    let (gr, gi) = (size * gpd * c, size * gpd * s);
+    let (nr, ni) = (gr + dr, gi + di);
+    EffectStep {
+        along: (dr * c + di * s) / gpd,
+        length: dr.hypot(di) / gpd,
+        size: nr.hypot(ni) / gpd,
+        phase: ni.atan2(nr),
+    }
+}
+
 /// Where a candidate's runs start: the bank's fit with its columns, the effect at its
 /// fitted size (with the vibration's phase), and the options whose model is the calibrated
 /// one refitted jointly with it. An error when the effect cannot be sized or that model is
@@ -623,8 +650,9 @@ fn test_one(
         spans,
         ..
     } = *inp;
-    let (fit_e, specs, vib_phase, opts_e) = joint_start(inp, effect)?;
+    let (fit_e, specs, mut vib_phase, opts_e) = joint_start(inp, effect)?;
     let mut rows_e = Rows::build_with(rec, &opts_e, &specs, vib_phase, timing)?;
+    let vibration = effect.signature() == Some(Signature::Vibration);
     // Gauss–Newton steps on the effect's run: the 14 θ and the effect's size refitted on
     // the gap it leaves (the effect's columns about that run), the simulator re-run; each
     // run judged by the two rules, the last one's judgement the test's
@@ -642,19 +670,36 @@ fn test_one(
     };
     let (stopped, next_step) = loop {
         let usable = both_usable(rows, &rows_e);
-        let ecols = match super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans) {
+        let ecols = if vibration {
+            Ok(super::vibration::columns_at(rec, &rows_e, inp.cols.beat).to_vec())
+        } else {
+            super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans)
+        };
+        let ecols = match ecols {
             Ok(c) => c,
             Err(e) => break failed(limits, runs.len(), format!("its columns: {e:#}")),
         };
         let (step, _) = refit(&rows_e, &usable, spans, &ecols);
-        let delta = step.beta.get(14).copied();
         let size = specs[0].size;
-        let rel = delta.map(|d| d / size);
-        if let Some(d) = delta {
-            if hopeless(size, d, j.unexplained, j.confirmed) {
+        let moved = if vibration {
+            match step.beta.get(14..16) {
+                Some(&[dr, di]) => Some(vibration_step(size, vib_phase, rows.gpd, dr, di)),
+                _ => None,
+            }
+        } else {
+            step.beta.get(14).map(|&d| EffectStep {
+                along: d,
+                length: d,
+                size: size + d,
+                phase: vib_phase,
+            })
+        };
+        let rel = moved.map(|m| m.length / size);
+        if let Some(m) = moved {
+            if hopeless(size, m.along, j.unexplained, j.confirmed) {
                 break (Stop::Hopeless, None);
             }
-            if converged(size, d, theta_step_sigmas(&step)) {
+            if converged(size, m.length, theta_step_sigmas(&step)) {
                 break (Stop::Converged, rel);
             }
         }
@@ -666,8 +711,10 @@ fn test_one(
             *t = *b;
         }
         let mut next = specs.clone();
-        if let Some(d) = delta {
-            next[0].size += d;
+        let mut next_phase = vib_phase;
+        if let Some(m) = moved {
+            next[0].size = m.size;
+            next_phase = m.phase;
         }
         if !next[0].size.is_finite() {
             break failed(
@@ -696,13 +743,14 @@ fn test_one(
             model: m.clone(),
             ..opts.clone()
         };
-        let (r, jn) = match Rows::build_with(rec, &o, &next, vib_phase, timing)
+        let (r, jn) = match Rows::build_with(rec, &o, &next, next_phase, timing)
             .and_then(|r| judge(inp, &r).map(|jn| (r, jn)))
         {
             Ok(v) => v,
             Err(e) => break failed(limits, runs.len(), format!("its re-simulation: {e:#}")),
         };
         specs = next;
+        vib_phase = next_phase;
         model_k = m;
         rows_e = r;
         j = jn;
@@ -863,7 +911,57 @@ fn partner(
 
 #[cfg(test)]
 mod tests {
-    use super::{CONFIRM_NOISE_MAX, NONE_NOISE_MAX, UNEXPLAINED_MAX, converged, hopeless, passes};
+    use super::{
+        CONFIRM_NOISE_MAX, NONE_NOISE_MAX, UNEXPLAINED_MAX, converged, hopeless, passes,
+        vibration_step,
+    };
+
+    /// The vibration's step moves its complex amplitude: a change along the amplitude
+    /// changes the size, one across it turns the phase; `along` is the size's change
+    /// ([`hopeless`] reads it), `length` the whole step's ([`converged`] reads it).
+    #[test]
+    fn the_vibrations_step_moves_its_size_and_its_phase() {
+        let gpd = 2.5e-7; // γ per °/s (ω0 = 2π·11 kHz)
+        let (size, phase) = (36.31_f64, 0.4_f64);
+        let (s, c) = phase.sin_cos();
+        // along: 36.31 → 34.6 °/s at the same phase
+        let d = (34.6 - size) * gpd;
+        let st = vibration_step(size, phase, gpd, d * c, d * s);
+        assert!((st.size - 34.6).abs() < 1e-9, "{st:?}");
+        assert!((st.phase - phase).abs() < 1e-12, "{st:?}");
+        assert!(
+            (st.along - (34.6 - size)).abs() < 1e-9 && (st.length - (size - 34.6)).abs() < 1e-9
+        );
+        // across: a quarter-radian turn at the same amplitude
+        let turn = 0.25_f64;
+        let (nr, ni) = (
+            size * gpd * (phase + turn).cos(),
+            size * gpd * (phase + turn).sin(),
+        );
+        let st = vibration_step(size, phase, gpd, nr - size * gpd * c, ni - size * gpd * s);
+        assert!((st.size - size).abs() < 1e-9 && (st.phase - (phase + turn)).abs() < 1e-12);
+        // the chord of the turn: along it only the second-order shortening
+        assert!(
+            (st.along - size * (turn.cos() - 1.0)).abs() < 1e-9,
+            "{st:?}"
+        );
+        assert!(
+            (st.length - 2.0 * size * (0.5 * turn).sin()).abs() < 1e-9,
+            "{st:?}"
+        );
+        assert!(
+            !converged(size, st.length, 0.0),
+            "a turn of 0.25 rad is a step"
+        );
+        // through zero: a step past the origin reverses it and is what `hopeless` reads
+        let d = -2.0 * size * gpd;
+        let st = vibration_step(size, phase, gpd, d * c, d * s);
+        assert!(
+            (st.size - size).abs() < 1e-9
+                && (st.phase - (phase - std::f64::consts::PI)).abs() < 1e-12
+        );
+        assert!(hopeless(size, st.along, 1.5, false));
+    }
 
     /// Blind run 19's out-of-span records that a confirmation named (refsim seed 2020):
     /// 0039, a Coulomb friction whose geometric-nonlinearity run left 0.15 % of the gap at

@@ -101,6 +101,16 @@ fn vibration_columns(
     ]
 }
 
+/// The vibration's in-phase and quadrature columns at `beat` about `rows`: about a run of
+/// the record with the vibration in it, the Gauss–Newton step of its confirmation
+/// ([`super::confirm`]).
+pub(crate) fn columns_at(rec: &Record, rows: &Rows, beat: f64) -> [Column; 2] {
+    let psi = psi_of(rec);
+    let f_ref = first_pump_hz(rec);
+    let vbasis = vib_basis(&rows.base, TAU * f_ref / rows.omega0);
+    vibration_columns(&rows.base, &vbasis, &rows.svf, &psi, &rows.t, f_ref + beat)
+}
+
 /// The beat (Hz) whose vibration columns most reduce the fit-span energy on top of the
 /// baseline columns `base_cols`, and those columns.
 pub(crate) fn scan_beat(
