@@ -306,6 +306,26 @@ mod tests {
         );
     }
 
+    /// Sweep seed 101's vibration at 15.3 °/s (`lod 6 101 DIR 7 angular`, its fifth size,
+    /// first device): below its stated limit of 20 °/s the vibration's gap is under the 5 %
+    /// of the held-out energy that a gap needs, and the record read `none`; the vibration
+    /// stands far above the beat scan's chance level, off the dither lines, and is named at
+    /// the noise (`verdict::vibration_at_noise`).
+    #[test]
+    fn a_vibration_under_the_gap_is_named_at_the_noise() {
+        let sc = Scenario::load("characterise").unwrap();
+        let size = grid(size_range(Effect::AngularVibration), 7)[4];
+        assert!((size - 15.3).abs() < 0.1, "{size}");
+        let t = Target::Library(Effect::AngularVibration);
+        let d = draw_at(t, size, "av15".into(), &mut job_rng(101, 0, 4, 0));
+        let (answer, confirmation) = verdict_of(&sc, &d, "av15");
+        assert_eq!(
+            answer,
+            crate::diagnose::Answer::Effect(Effect::AngularVibration),
+            "{confirmation}"
+        );
+    }
+
     /// Record 93 of the blind draw of seed 2626: an angular vibration at 36.5 °/s, 1.8×
     /// its limit, fitted at 36.3 ± 1.0 °/s and closing all the floor closes, at 1.098 × its
     /// noise. Its drive 1st-quadrature row reads 1.77 after the vibration against the

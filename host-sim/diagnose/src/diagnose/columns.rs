@@ -276,6 +276,8 @@ pub(crate) struct Columns {
     pub untestable: Vec<(Effect, String)>,
     /// The vibration's beat found by the scan, Hz.
     pub beat: f64,
+    /// The record's dither lines, Hz ([`super::vibration::dither_lines`]).
+    pub dither_hz: Vec<f64>,
 }
 
 impl Columns {
@@ -336,6 +338,7 @@ impl Columns {
             ca_idx: Vec::new(),
             untestable,
             beat,
+            dither_hz: super::vibration::dither_lines(rec),
         })
     }
 

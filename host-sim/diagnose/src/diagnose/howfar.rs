@@ -328,6 +328,7 @@ mod tests {
             ca_idx: Vec::new(),
             untestable: vec![(Effect::Anisodamping, "parameter face".into())],
             beat: 2.5,
+            dither_hz: Vec::new(),
         }
     }
 

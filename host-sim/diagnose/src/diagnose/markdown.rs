@@ -3,7 +3,7 @@
 use super::calibrate::{percent_pm, value_to_sigma};
 use super::report::Report;
 use super::verdict::Answer;
-use super::{GAP_MIN, GUARD_S, NONE_NOISE_MAX, SHARE_MIN, T_SIG, UNEXPLAINED_MAX};
+use super::{GAP_MIN, GUARD_S, NONE_NOISE_MAX, SHARE_MIN, T_SIG, UNEXPLAINED_MAX, VIB_NOISE_T};
 
 /// A number with 4 significant digits (scientific when small or large).
 fn g4(v: f64) -> String {
@@ -150,6 +150,26 @@ fn verdict_text(r: &Report) -> String {
             100.0 * r.unexplained_above_noise,
             100.0 * UNEXPLAINED_MAX
         ),
+        Answer::Effect(v) if r.gap_fraction_of_baseline < GAP_MIN => {
+            match r
+                .ranking
+                .iter()
+                .find(|c| c.effect == v && c.beat_hz.is_some())
+            {
+                Some(c) => format!(
+                    "`{v}` at the record's noise: the best model closes {:.1} % of the held-out baseline row energy (under the {:.0} % gap), but the vibration stands at {:.1} σ (at least {VIB_NOISE_T}) at a beat of {:+.3} Hz and closes held-out energy it was not fitted on.",
+                    100.0 * r.gap_fraction_of_baseline,
+                    100.0 * GAP_MIN,
+                    c.size.unwrap_or(0.0).abs() / c.size_sigma.unwrap_or(f64::INFINITY),
+                    c.beat_hz.unwrap_or(0.0),
+                ),
+                None => format!(
+                    "`{v}` at the record's noise: the best model closes {:.1} % of the held-out baseline row energy (under the {:.0} % gap); the parameter face names it (below).",
+                    100.0 * r.gap_fraction_of_baseline,
+                    100.0 * GAP_MIN,
+                ),
+            }
+        }
         Answer::Effect(v) => format!(
             "`{v}` is significant and closes {:.0} % of the explainable held-out gap{}.",
             100.0

@@ -228,6 +228,19 @@ pub const WARMUP_S: f64 = 0.5;
 /// fit span (≈ 180 samples), several times the rows' correlation length (their residual's
 /// autocorrelation is gone by ≈ 50 samples), so the blocks stay nearly independent.
 pub const BLOCKS: usize = 32;
+/// An angular vibration is named at the record's noise (below the [`GAP_MIN`] gate, the
+/// record within [`NONE_NOISE_MAX`] of its noise) when its |size|/σ reaches this, twice
+/// [`T_SIG`]: the beat scan's best on development records without a vibration reaches
+/// 2.8–5.3 on refsim seed 2121's 28 clean devices and 1.8–6.8 on seed 2020's 28
+/// out-of-library records, the 12.8 of a spurious mode at a beat of −0.02 Hz aside
+/// ([`VIB_BEAT_CYCLES`]). A pure tone at its beat is not what a toleranced device's model
+/// error makes; a 27 °/s vibration's gap is 1.2 % of the held-out energy at 25σ
+/// (docs/notes.md, "A vibration at the noise").
+pub const VIB_NOISE_T: f64 = 10.0;
+/// ... and its beat makes at least this many cycles over the fit span (0.17 Hz on a 20 s
+/// record): slower, the vibration is a rate offset turning slowly over the record, which
+/// the parameter face tests (anisodamping).
+pub const VIB_BEAT_CYCLES: f64 = 2.0;
 /// Angular vibration beat search range (|beat| ≤), Hz, and its coarse step.
 pub const VIB_BEAT_MAX_HZ: f64 = 6.0;
 const VIB_BEAT_STEP_HZ: f64 = 0.1;

@@ -24,7 +24,7 @@ use super::verdict::{Answer, Decision, Verdict};
 use super::{
     COHERENT, CONFIRM_NOISE_MAX, GAP_MIN, GUARD_S, NOISE_ROW_ENERGY, NONE_NOISE_MAX, Options,
     ROW_GAP_MIN, ROW_GAP_SHARE, ROW_LABELS, ROW_UNEXPLAINED_MAX, SECOND_MIN, SHARE_MIN, T_SIG,
-    UNEXPLAINED_MAX, VIB_BEAT_MAX_HZ,
+    UNEXPLAINED_MAX, VIB_BEAT_CYCLES, VIB_BEAT_MAX_HZ, VIB_NOISE_T,
 };
 
 /// The format tag of report.json (3: format 2's keys and `confirmation`).
@@ -128,6 +128,8 @@ pub struct Thresholds {
     pub row_gap_min: f64,
     pub row_unexplained_max: f64,
     pub confirm_noise_max: f64,
+    pub vib_noise_t: f64,
+    pub vib_beat_cycles: f64,
 }
 
 impl Thresholds {
@@ -146,6 +148,8 @@ impl Thresholds {
             row_gap_min: ROW_GAP_MIN,
             row_unexplained_max: ROW_UNEXPLAINED_MAX,
             confirm_noise_max: CONFIRM_NOISE_MAX,
+            vib_noise_t: VIB_NOISE_T,
+            vib_beat_cycles: VIB_BEAT_CYCLES,
         }
     }
 }
@@ -157,6 +161,10 @@ pub struct BeatScan {
     pub range_hz: f64,
     /// The beat found, Hz.
     pub best_hz: f64,
+    /// The record's dither lines, Hz (pump frequency, pump amplitude; where each moves):
+    /// a beat on one or its harmonics is not named at the noise.
+    #[serde(default)]
+    pub dither_hz: Vec<f64>,
 }
 
 /// Candidates this record cannot separate (or test), and the excitation that would.
@@ -372,6 +380,7 @@ pub(crate) fn assemble(p: Parts<'_>) -> Report {
         vibration_beat_scan: BeatScan {
             range_hz: VIB_BEAT_MAX_HZ,
             best_hz: p.cols.beat,
+            dither_hz: p.cols.dither_hz.clone(),
         },
         samples: t.len(),
         seconds: p.seconds,
@@ -450,6 +459,7 @@ pub fn not_diagnosed(rec: &Record, opts: &Options, why: &str, seconds: f64) -> D
         vibration_beat_scan: BeatScan {
             range_hz: VIB_BEAT_MAX_HZ,
             best_hz: 0.0,
+            dither_hz: Vec::new(),
         },
         separating_excitation: Vec::new(),
         samples: rec.rows.len(),
