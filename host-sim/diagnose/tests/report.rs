@@ -287,6 +287,7 @@ fn report() -> impl Strategy<Value = Report> {
                 vibration_beat_scan: BeatScan {
                     range_hz: 6.0,
                     best_hz: gc,
+                    dither_hz: vec![5.0, 1.3],
                 },
                 separating_excitation: sep
                     .into_iter()
