@@ -2,8 +2,8 @@
 //! baseline energy (of the calibrated model) and that residual is at the record's own noise
 //! (at most [`NONE_NOISE_MAX`] × its noise per row), unless the parameter face names an
 //! effect (anisodamping against a rate table) or an angular vibration stands far above the
-//! beat scan's chance level ([`vibration_at_noise`]). An effect: the best candidate is significant and closes at least
-//! [`SHARE_MIN`] of what the floor closes, and it (with a second effect on top, if one adds
+//! beat scan's chance level (`vibration_at_noise`). An effect: the best candidate is
+//! significant and closes at least [`SHARE_MIN`] of what the floor closes, and it (with a second effect on top, if one adds
 //! at least [`SECOND_MIN`]) leaves at most [`UNEXPLAINED_MAX`] of the gap above the noise,
 //! and no row holding a share of the gap mostly unexplained. `unknown`: a gap no library
 //! effect explains.
