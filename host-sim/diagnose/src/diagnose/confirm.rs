@@ -562,6 +562,42 @@ pub fn hopeless(size: f64, delta: f64, unexplained: f64, passed: bool) -> bool {
     !passed && unexplained > HOPELESS_UNEXPLAINED && size * (size + delta) < 0.0
 }
 
+/// The Gauss–Newton step from the effect's run `rows_e` (at `size`, the vibration at
+/// `phase`): the 14 θ and the effect's own columns rebuilt about the run (the vibration's
+/// two at the scanned beat) refitted on the gap it leaves, and the step on the effect.
+/// An error when its columns cannot be built.
+fn step_on(
+    inp: &Inputs<'_>,
+    effect: Effect,
+    opts_e: &Options,
+    rows_e: &Rows,
+    usable: &[bool],
+    size: f64,
+    phase: f64,
+) -> anyhow::Result<(Fit, Option<EffectStep>)> {
+    let vibration = effect.signature() == Some(Signature::Vibration);
+    let ecols = if vibration {
+        super::vibration::columns_at(inp.rec, rows_e, inp.cols.beat).to_vec()
+    } else {
+        super::columns::effect_columns(effect, inp.rec, opts_e, rows_e, inp.spans)?
+    };
+    let (step, _) = refit(rows_e, usable, inp.spans, &ecols);
+    let moved = if vibration {
+        match step.beta.get(14..16) {
+            Some(&[dr, di]) => Some(vibration_step(size, phase, inp.rows.gpd, dr, di)),
+            _ => None,
+        }
+    } else {
+        step.beta.get(14).map(|&d| EffectStep {
+            along: d,
+            length: d,
+            size: size + d,
+            phase,
+        })
+    };
+    Ok((step, moved))
+}
+
 /// A Gauss–Newton step on the effect being confirmed: its size's change along the size
 /// (what [`hopeless`] reads), the step's length (what [`converged`] reads; the two differ
 /// only for the vibration, whose step also turns its phase), and the size and the
@@ -644,15 +680,10 @@ fn test_one(
     limits: &mut Vec<Limitation>,
 ) -> anyhow::Result<Tested> {
     let Inputs {
-        rec,
-        opts,
-        rows,
-        spans,
-        ..
+        rec, opts, rows, ..
     } = *inp;
     let (fit_e, specs, mut vib_phase, opts_e) = joint_start(inp, effect)?;
     let mut rows_e = Rows::build_with(rec, &opts_e, &specs, vib_phase, timing)?;
-    let vibration = effect.signature() == Some(Signature::Vibration);
     // Gauss–Newton steps on the effect's run: the 14 θ and the effect's size refitted on
     // the gap it leaves (the effect's columns about that run), the simulator re-run; each
     // run judged by the two rules, the last one's judgement the test's
@@ -670,29 +701,10 @@ fn test_one(
     };
     let (stopped, next_step) = loop {
         let usable = both_usable(rows, &rows_e);
-        let ecols = if vibration {
-            Ok(super::vibration::columns_at(rec, &rows_e, inp.cols.beat).to_vec())
-        } else {
-            super::columns::effect_columns(effect, rec, &opts_e, &rows_e, spans)
-        };
-        let ecols = match ecols {
-            Ok(c) => c,
-            Err(e) => break failed(limits, runs.len(), format!("its columns: {e:#}")),
-        };
-        let (step, _) = refit(&rows_e, &usable, spans, &ecols);
         let size = specs[0].size;
-        let moved = if vibration {
-            match step.beta.get(14..16) {
-                Some(&[dr, di]) => Some(vibration_step(size, vib_phase, rows.gpd, dr, di)),
-                _ => None,
-            }
-        } else {
-            step.beta.get(14).map(|&d| EffectStep {
-                along: d,
-                length: d,
-                size: size + d,
-                phase: vib_phase,
-            })
+        let (step, moved) = match step_on(inp, effect, &opts_e, &rows_e, &usable, size, vib_phase) {
+            Ok(v) => v,
+            Err(e) => break failed(limits, runs.len(), format!("its columns: {e:#}")),
         };
         let rel = moved.map(|m| m.length / size);
         if let Some(m) = moved {
