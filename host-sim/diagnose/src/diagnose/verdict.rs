@@ -3,10 +3,10 @@
 //! (at most [`NONE_NOISE_MAX`] × its noise per row), unless the parameter face names an
 //! effect (anisodamping against a rate table) or an angular vibration stands far above the
 //! beat scan's chance level (`vibration_at_noise`). An effect: the best candidate is
-//! significant and closes at least [`SHARE_MIN`] of what the floor closes, and it (with a second effect on top, if one adds
-//! at least [`SECOND_MIN`]) leaves at most [`UNEXPLAINED_MAX`] of the gap above the noise,
-//! and no row holding a share of the gap mostly unexplained. `unknown`: a gap no library
-//! effect explains.
+//! significant and closes at least [`SHARE_MIN`] of what the floor closes, and it (with a
+//! second effect on top, if one adds at least [`SECOND_MIN`]) leaves at most
+//! [`UNEXPLAINED_MAX`] of the gap above the noise, and no row holding a share of the gap
+//! mostly unexplained. `unknown`: a gap no library effect explains.
 
 use std::fmt;
 use std::str::FromStr;
@@ -218,7 +218,14 @@ pub(crate) fn decide(
         .and_then(|h| h.name.parse::<Effect>().ok());
     // a vibration at the noise: a tone far above the beat scan's chance level, resolved
     // from the pump's own frequency, that the held-out span finds again
-    let fit_s = rows.t[spans.fit_end.min(rows.t.len() - 1)] - rows.t[spans.first];
+    let fit_s = match (
+        rows.t
+            .get(spans.fit_end.min(rows.t.len().saturating_sub(1))),
+        rows.t.get(spans.first),
+    ) {
+        (Some(end), Some(start)) => end - start,
+        _ => 0.0,
+    };
     let tone_named = ranking
         .iter()
         .find(|c| vibration_at_noise(c, fit_s, &cols.dither_hz))
