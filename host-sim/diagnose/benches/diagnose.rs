@@ -1,7 +1,8 @@
 //! Wall time of the sim-to-real diagnosis of a 60 s record (target: under 10 s on this
 //! machine), with the re-simulations (the model over the record, the effect over the
 //! held-out span); and of the two longest paths there are, four whole-record runs each
-//! (the calibration's two and [`CONFIRM_RUNS`] more, `Options::confirm_runs`), on a 60 s
+//! (the calibration's two and [`CONFIRM_RUNS`] more: [`CONFIRM_BUDGET_S`] of a 60 s
+//! record, `Options::confirm_runs_for`; a shorter record re-simulates fewer seconds), on a 60 s
 //! record ([`slowest_path_record`]): the confirmation by re-simulation of two candidates,
 //! both rejected (the calibration held to its two steps), and by default the calibration's
 //! further steps while it has not converged, which take the whole budget.
@@ -10,7 +11,9 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use paragyro_diagnose::blind::outside::slowest_path_record;
-use paragyro_diagnose::diagnose::confirm::{CONFIRM_MAX, CONFIRM_RUNS, HOPELESS_UNEXPLAINED};
+use paragyro_diagnose::diagnose::confirm::{
+    CONFIRM_BUDGET_S, CONFIRM_MAX, CONFIRM_RUNS, HOPELESS_UNEXPLAINED,
+};
 use paragyro_diagnose::diagnose::{
     CALIBRATION_MAX_RESIMULATIONS, CALIBRATION_RESIMULATIONS, Options, Report, diagnose,
 };
@@ -47,6 +50,8 @@ fn bench(c: &mut Criterion) {
 /// verdict stays `unknown`.
 fn assert_slowest_path(r: &Report) {
     assert_eq!((CONFIRM_MAX, CONFIRM_RUNS), (2, 2));
+    assert_eq!(Options::default().confirm_runs_for(60.0), CONFIRM_RUNS);
+    assert_eq!(CONFIRM_BUDGET_S, 120.0);
     for c in &r.confirmation {
         assert_eq!(c.runs.len(), 1, "{c:?}");
         assert!(c.runs[0].unexplained > HOPELESS_UNEXPLAINED, "{c:?}");

@@ -313,7 +313,7 @@ fn a_large_thermal_drift_is_named_at_its_size_by_the_linear_test() {
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(61);
     let sc = DeviceDraw::draw(&mut rng).apply(&sc0);
     let three = Options {
-        confirm_runs: 3,
+        confirm_runs: Some(3),
         ..Options::default()
     };
     for r in [

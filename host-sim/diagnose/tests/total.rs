@@ -542,7 +542,7 @@ fn a_huge_finite_value_is_left_out_with_a_limitation_not_a_nan_report() {
     }
     let no_resim = Options {
         resimulate: false,
-        confirm_runs: 0,
+        confirm_runs: Some(0),
         ..Options::default()
     };
     let d = diagnose(&rec, &no_resim).unwrap();

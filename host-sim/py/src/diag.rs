@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use paragyro_diagnose::diagnose::{
-    Diagnosis, Model, Options, confirm, diagnose, to_json_sorted, write_report,
+    Diagnosis, Model, Options, diagnose, to_json_sorted, write_report,
 };
 use paragyro_simulator::record::{self, Record};
 use paragyro_simulator::scenario::Scenario;
@@ -58,7 +58,7 @@ pub(crate) fn options(
 ) -> Result<Options, Fail> {
     let mut opts = Options {
         resimulate,
-        confirm_runs: confirm_runs.unwrap_or(confirm::CONFIRM_RUNS),
+        confirm_runs,
         ..Default::default()
     };
     if let Some(m) = model {

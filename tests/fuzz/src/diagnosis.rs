@@ -210,7 +210,7 @@ pub fn diagnosis(data: &[u8]) {
     };
     let opts = Options {
         resimulate: false,
-        confirm_runs: 0,
+        confirm_runs: Some(0),
         ..Options::default()
     };
     let d = match diagnose(&rec, &opts) {

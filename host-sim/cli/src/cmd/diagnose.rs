@@ -35,9 +35,10 @@ pub struct DiagnoseOpts {
     /// fifth of the time of a 60 s record's diagnosis): a calibration that has not
     /// converged takes further steps from them first, the confirmation of large effects
     /// has the rest (more lets a candidate take more Gauss–Newton steps; 0 turns both
-    /// off).
-    #[arg(long, value_name = "N", default_value_t = paragyro_diagnose::diagnose::confirm::CONFIRM_RUNS)]
-    pub confirm_runs: usize,
+    /// off). Default: as many as 120 s of record hold, at least 2 (2 on a 60 s record,
+    /// 6 on a 20 s one).
+    #[arg(long, value_name = "N")]
+    pub confirm_runs: Option<usize>,
     /// Leave the drive's excursions the re-simulation does not reproduce (a regrowth after
     /// a collapse, set by the drive's noise floor) out of the rows and the noise estimate;
     /// by default they are kept and named in the report's limitations.
@@ -175,6 +176,6 @@ mod tests {
             "3",
             "--no-resim",
         ]);
-        assert!(o.leave_out_excursions && o.confirm_runs == 3 && !o.resimulate);
+        assert!(o.leave_out_excursions && o.confirm_runs == Some(3) && !o.resimulate);
     }
 }

@@ -177,11 +177,16 @@ pub(crate) struct Inputs<'a> {
 /// Candidates re-simulated at most (the re-simulation is the cost).
 pub const CONFIRM_MAX: usize = 2;
 
-/// Whole-record re-simulations the confirmation makes at most by default
-/// ([`Options::confirm_runs`]): with the calibration's two, four runs of the record, the
-/// bound that keeps a 60 s record under 10 s (host-sim/diagnose/docs/notes.md, "Cost"; the bench's second
-/// function takes it).
+/// Whole-record re-simulations the confirmation makes at least by default
+/// ([`Options::confirm_runs_for`]): with the calibration's two, four runs of the record.
 pub const CONFIRM_RUNS: usize = 2;
+
+/// Seconds of record the confirmation re-simulates at most by default
+/// ([`Options::confirm_runs_for`]): a run costs in proportion to its record's length, and
+/// [`CONFIRM_RUNS`] runs of a 60 s record, with the calibration's two, keep it under 10 s
+/// (host-sim/diagnose/docs/notes.md, "Cost"; the bench's second function takes it); a
+/// 20 s record has six runs for the same time.
+pub const CONFIRM_BUDGET_S: f64 = 120.0;
 
 /// A Gauss–Newton step moving the effect's size by at most this share of it, and each θ
 /// by at most [`CONVERGED_THETA_SIGMAS`] of its σ, is not taken ([`converged`]).
@@ -238,7 +243,7 @@ pub(crate) fn confirm(
     {
         return (decision, Vec::new());
     }
-    if inp.opts.confirm_runs == 0 {
+    if inp.opts.runs() == 0 {
         // the candidates it would have tested are said, not dropped silently
         let would = picks_up_to(inp, ranking, CONFIRM_MAX);
         if !would.is_empty() {
@@ -251,7 +256,7 @@ pub(crate) fn confirm(
     // the first pair that passed (a candidate's run with a second effect fitted about it),
     // the verdict only when no candidate passes alone
     let mut pair: Option<(Effect, Second)> = None;
-    let mut left = inp.opts.confirm_runs;
+    let mut left = inp.opts.runs();
     for (i, &(effect, first)) in picks.iter().enumerate() {
         if left == 0 {
             limits.push(budget_spent(&picks[i..]));
@@ -357,7 +362,7 @@ fn named(
 /// Each pick comes with whether the first rule chose it: the second rule's candidates are
 /// re-simulated only with the runs the first rule's leave of the budget.
 fn picks(inp: &Inputs<'_>, ranking: &[Candidate]) -> Vec<(Effect, bool)> {
-    picks_up_to(inp, ranking, CONFIRM_MAX.min(inp.opts.confirm_runs))
+    picks_up_to(inp, ranking, CONFIRM_MAX.min(inp.opts.runs()))
 }
 
 /// The limitation of candidates the confirmation did not re-simulate: the budget's

@@ -301,10 +301,12 @@ pub struct Options {
     /// RK4 steps per carrier period of the re-run.
     pub steps_per_period: usize,
     /// Whole-record re-simulations beyond the calibration's first
-    /// [`CALIBRATION_RESIMULATIONS`] ([`confirm::CONFIRM_RUNS`] by default: the bound on
-    /// the diagnosis's time): the calibration's further steps while it has not converged
-    /// take from it first, the confirmation by re-simulation has the rest.
-    pub confirm_runs: usize,
+    /// [`CALIBRATION_RESIMULATIONS`] (the bound on the diagnosis's time): the calibration's
+    /// further steps while it has not converged take from it first, the confirmation by
+    /// re-simulation has the rest. `None` (the default): as many as
+    /// [`confirm::CONFIRM_BUDGET_S`] seconds of the record hold, at least
+    /// [`confirm::CONFIRM_RUNS`] ([`Options::confirm_runs_for`]).
+    pub confirm_runs: Option<usize>,
     /// Calibration steps at most ([`CALIBRATION_MAX_RESIMULATIONS`] by default; at most
     /// [`CALIBRATION_RESIMULATIONS`] leaves the whole budget to the confirmation).
     pub calibration_steps: usize,
@@ -320,10 +322,33 @@ impl Default for Options {
             model: Model::table2(),
             resimulate: true,
             steps_per_period: 128,
-            confirm_runs: confirm::CONFIRM_RUNS,
+            confirm_runs: None,
             calibration_steps: CALIBRATION_MAX_RESIMULATIONS,
             leave_out_excursions: false,
         }
+    }
+}
+
+impl Options {
+    /// The budget of whole-record re-simulations for a record of `duration_s` seconds:
+    /// [`Options::confirm_runs`] when set, else as many as [`confirm::CONFIRM_BUDGET_S`]
+    /// seconds of record hold (a run's time is its record's length), at least
+    /// [`confirm::CONFIRM_RUNS`]: 2 on a 60 s record, 6 on a 20 s one.
+    pub fn confirm_runs_for(&self, duration_s: f64) -> usize {
+        self.confirm_runs.unwrap_or_else(|| {
+            let fit = if duration_s > 0.0 {
+                (confirm::CONFIRM_BUDGET_S / duration_s + 1e-9).floor()
+            } else {
+                0.0
+            };
+            // (a float's `as` saturates: a non-finite or huge quotient is bounded)
+            (fit.min(1e6) as usize).max(confirm::CONFIRM_RUNS)
+        })
+    }
+
+    /// The budget of whole-record runs once [`diagnose`] has resolved it.
+    pub(crate) fn runs(&self) -> usize {
+        self.confirm_runs.unwrap_or(confirm::CONFIRM_RUNS)
     }
 }
 
@@ -405,7 +430,7 @@ pub(crate) fn calibration(
                     break;
                 }
                 let extra = step + 1 - CALIBRATION_RESIMULATIONS;
-                if extra > opts.confirm_runs {
+                if extra > opts.runs() {
                     limits.push(report::Limitation::new(
                         "calibration",
                         format!(
@@ -487,9 +512,10 @@ pub(crate) fn calibration(
         limits.push(report::Limitation::new("regrowth", why));
     }
     // the steps beyond the usual ones were the confirmation's
-    opts_cal.confirm_runs = opts
-        .confirm_runs
-        .saturating_sub(steps.saturating_sub(CALIBRATION_RESIMULATIONS));
+    opts_cal.confirm_runs = Some(
+        opts.runs()
+            .saturating_sub(steps.saturating_sub(CALIBRATION_RESIMULATIONS)),
+    );
     Ok((rows, spans, opts_cal, fit, steps))
 }
 
@@ -512,6 +538,12 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
         );
     }
     let wall = Instant::now();
+    // the budget of whole-record runs, for this record's length
+    let duration_s = rec.rows.len() as f64 / rec.header.fs_hz;
+    let opts = &Options {
+        confirm_runs: Some(opts.confirm_runs_for(duration_s)),
+        ..opts.clone()
+    };
     match diagnose_stages(rec, opts, wall) {
         Ok(d) => Ok(d),
         // a record the stages cannot take at all (shorter than 2 s, less than 1 s of

@@ -56,25 +56,92 @@ impl Resim<'_> {
             |&(a, b)| self.chunk(&psi, a, b),
         )?;
         let mut out: Vec<LockinOut> = halves.into_iter().flatten().collect();
-        if k0 == 0 {
-            // the first half starts from rest: put it on the record's branch
-            let (mut same, mut flip) = (0.0, 0.0);
-            for k in mid / 2..mid {
-                let x = rec.rows[k].lockin.x_um[0];
-                let o = out[k].x_um[0];
+        on_record_branch(rec, &mut out, k0, mid);
+        Ok(out)
+    }
+}
+
+/// The stretches of a re-simulation (`out`, its first sample the record's `k0`) that
+/// choose their branch: the first half from rest (to `mid`), and from each collapse of
+/// the record's drive ([`rows::COLLAPSE_SHARE`](super::rows::COLLAPSE_SHARE) of its
+/// working amplitude, once it has built up to half of it) to the next. Each starts where
+/// the drive grows from the floor, and whether it grows at phase 0 or π against the half
+/// pump is the floor's: a device's noise, a simulator's smallest terms. A stretch begins
+/// at the re-simulation's quietest sample of the collapse (its 1st and 3rd harmonics, which
+/// a change of branch negates, at their smallest), so that the change is no step in the
+/// rows. The second half starts from the record's state, on its branch.
+fn branch_stretches(rec: &Record, out: &[LockinOut], k0: usize, mid: usize) -> Vec<(usize, usize)> {
+    use super::rows::{COLLAPSE_END_SHARE, COLLAPSE_SHARE};
+    let k1 = k0 + out.len();
+    let amp = |k: usize| rec.rows[k].lockin.x_um[0].abs();
+    let odd = |o: &LockinOut| {
+        [o.x_um[0], o.x_um[2], o.y_um[0], o.y_um[2]]
+            .iter()
+            .map(|v| v.re * v.re + v.im * v.im)
+            .sum::<f64>()
+    };
+    let mut a: Vec<f64> = (k0..k1).map(amp).filter(|v| v.is_finite()).collect();
+    a.sort_by(f64::total_cmp);
+    let mut starts = vec![mid];
+    if k0 == 0 {
+        starts.push(0);
+    }
+    if let Some(&working) = a.get(a.len().saturating_sub(1) * 9 / 10)
+        && working > 0.0
+    {
+        let (low, high) = (COLLAPSE_SHARE * working, COLLAPSE_END_SHARE * working);
+        let mut k = (k0..k1).find(|&k| amp(k) >= 0.5 * working).unwrap_or(k1);
+        while k < k1 {
+            if amp(k) < low {
+                let end = (k..k1).find(|&j| amp(j) > high).unwrap_or(k1);
+                let quiet = (k..end)
+                    .filter(|&j| odd(&out[j - k0]).is_finite())
+                    .min_by(|&i, &j| odd(&out[i - k0]).total_cmp(&odd(&out[j - k0])));
+                starts.extend(quiet);
+                k = end;
+            } else {
+                k += 1;
+            }
+        }
+    }
+    starts.sort_unstable();
+    starts.dedup();
+    let mut bounds: Vec<(usize, usize)> = Vec::new();
+    for (i, &a) in starts.iter().enumerate() {
+        let b = starts.get(i + 1).copied().unwrap_or(k1);
+        // the half that starts on the record's branch keeps it until its first collapse
+        if a != mid && b > a {
+            bounds.push((a, b));
+        }
+    }
+    bounds
+}
+
+/// Puts each stretch of the re-simulation `out` (its first sample the record's `k0`,
+/// halves split at `mid`) that chose its own branch ([`branch_stretches`]) on the
+/// record's: its 1st and 3rd harmonics negated where that brings its drive 1st harmonic
+/// closer to the record's (over the stretch; the first one from rest over its second
+/// half, past the start-up). The 2nd harmonic and DC are the same on both branches.
+fn on_record_branch(rec: &Record, out: &mut [LockinOut], k0: usize, mid: usize) {
+    for (a, b) in branch_stretches(rec, out, k0, mid) {
+        let from = if a == 0 { b / 2 } else { a };
+        let (mut same, mut flip) = (0.0, 0.0);
+        for k in from..b {
+            let x = rec.rows[k].lockin.x_um[0];
+            let o = out[k - k0].x_um[0].scale(rec.header.l0_um);
+            if (x.re + x.im + o.re + o.im).is_finite() {
                 same += (x.re - o.re).powi(2) + (x.im - o.im).powi(2);
                 flip += (x.re + o.re).powi(2) + (x.im + o.im).powi(2);
             }
-            if flip < same {
-                for o in out.iter_mut().take(mid) {
-                    for k in [0, 2] {
-                        o.x_um[k] = Cplx::new(-o.x_um[k].re, -o.x_um[k].im);
-                        o.y_um[k] = Cplx::new(-o.y_um[k].re, -o.y_um[k].im);
-                    }
+        }
+        if flip < same {
+            for o in &mut out[a - k0..b - k0] {
+                for h in [0, 2] {
+                    o.x_um[h] = Cplx::new(-o.x_um[h].re, -o.x_um[h].im);
+                    o.y_um[h] = Cplx::new(-o.y_um[h].re, -o.y_um[h].im);
                 }
             }
         }
-        Ok(out)
     }
 }
 
@@ -455,4 +522,115 @@ fn sim_grid(h: &paragyro_simulator::record::RecordHeader, pump_max: f64) -> f64 
         .and_then(|v| v.parse::<f64>().ok())
         .filter(|w| w.is_finite() && *w >= w_pump && *w <= 4.0)
         .unwrap_or((w_pump * 1.01).max(0.5))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{LockinOut, on_record_branch};
+    use paragyro_core::Cplx;
+    use paragyro_simulator::lockin::LockinExt;
+    use paragyro_simulator::record::{N_REQUIRED, Record, RecordHeader, RecordRow};
+
+    /// The drive's amplitude: 2 µm, a collapse to 2e-6 µm over samples 1000–1100 (deepest
+    /// at 1060), 2 µm again from 1200.
+    fn amp(k: usize) -> f64 {
+        match k {
+            0..1000 | 1200.. => 2.0,
+            _ => 2.0 * 10f64.powf(-6.0 * (1.0 - (k as f64 - 1060.0).abs() / 140.0)),
+        }
+    }
+
+    /// Lock-in outputs whose odd harmonics have the drive's amplitude with `sign(k)`; the
+    /// 2nd harmonic and the DC levels are the same on both branches.
+    fn outputs(n: usize, sign: impl Fn(usize) -> f64) -> Vec<LockinOut> {
+        (0..n)
+            .map(|k| {
+                let (a, s) = (amp(k), sign(k));
+                let mut o = LockinOut::from_channels(&[0.0; 14]);
+                o.x0_um = 0.1;
+                o.y0_um = -0.1;
+                o.x_um = [
+                    Cplx::new(s * a, 0.3 * s * a),
+                    Cplx::new(0.05, 0.0),
+                    Cplx::new(0.01 * s * a, 0.0),
+                ];
+                o.y_um = [
+                    Cplx::new(-0.4 * s * a, 0.5 * s * a),
+                    Cplx::new(0.0, 0.02),
+                    Cplx::new(0.0, 0.02 * s * a),
+                ];
+                o
+            })
+            .collect()
+    }
+
+    fn record(lockin: &[LockinOut]) -> Record {
+        Record {
+            header: RecordHeader {
+                f0_hz: 10_800.0,
+                l0_um: 1.0,
+                fs_hz: 500.0,
+                lockin_lpf_order: 4,
+                lockin_lpf_hz: 150.0,
+                pump_amp_ref_v: 1.0,
+                extra: Vec::new(),
+            },
+            rows: lockin
+                .iter()
+                .enumerate()
+                .map(|(k, o)| {
+                    let mut r = RecordRow::from_required(&[0.0; N_REQUIRED], None, None);
+                    r.t_s = k as f64 / 500.0;
+                    r.lockin = *o;
+                    r
+                })
+                .collect(),
+            warnings: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_regrowth_on_the_other_branch_is_put_on_the_records() {
+        let n = 3000;
+        // the record grows back at phase π, the re-simulation at 0
+        let rec = record(&outputs(n, |k| if k < 1060 { 1.0 } else { -1.0 }));
+        let mut sim = outputs(n, |_| 1.0);
+        // one half (`mid` at the end): the start from rest, then the regrowth
+        on_record_branch(&rec, &mut sim, 0, n);
+        for (k, (o, r)) in sim.iter().zip(&rec.rows).enumerate() {
+            assert_eq!(*o, r.lockin, "sample {k}");
+        }
+    }
+
+    #[test]
+    fn the_branch_changes_at_the_collapses_quietest_sample() {
+        let n = 3000;
+        // the record changed branch at 1030, deep in the collapse but not at its floor:
+        // the re-simulation is cut at its own quietest sample (1060), where the two
+        // differ by twice 1e-6 of the working amplitude at most
+        let rec = record(&outputs(n, |k| if k < 1030 { 1.0 } else { -1.0 }));
+        let mut sim = outputs(n, |_| 1.0);
+        let before = sim.clone();
+        on_record_branch(&rec, &mut sim, 0, n);
+        assert_eq!(sim[..1060], before[..1060]);
+        let b = before[1060].x_um[0];
+        assert_eq!(sim[1060].x_um[0], Cplx::new(-b.re, -b.im));
+        assert_eq!(sim[1060].x_um[1], before[1060].x_um[1]);
+        assert_eq!(sim[1060].x0_um, before[1060].x0_um);
+    }
+
+    #[test]
+    fn a_regrowth_on_the_records_branch_and_the_second_half_are_left_alone() {
+        let n = 3000;
+        let rec = record(&outputs(n, |k| if k < 1060 { 1.0 } else { -1.0 }));
+        let mut same = outputs(n, |k| if k < 1060 { 1.0 } else { -1.0 });
+        on_record_branch(&rec, &mut same, 0, n);
+        assert_eq!(same, outputs(n, |k| if k < 1060 { 1.0 } else { -1.0 }));
+        // a second half (from 1500) starts from the record's state: its first stretch is
+        // the record's, whatever it holds
+        let mut sim = outputs(n, |k| if (1060..1500).contains(&k) { -1.0 } else { 1.0 });
+        let before = sim.clone();
+        on_record_branch(&rec, &mut sim, 0, 1500);
+        assert_eq!(sim, before);
+    }
 }

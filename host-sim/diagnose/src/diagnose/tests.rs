@@ -51,3 +51,23 @@ fn noise_row_scatter_is_positive_and_below_each_rows_level() {
         assert!(*s > 0.0 && *s < 1.030 * p, "scatter {s} against level {p}");
     }
 }
+
+/// The confirmation's budget is counted in seconds of record: as many whole-record runs as
+/// `CONFIRM_BUDGET_S` holds, at least `CONFIRM_RUNS`; a budget the caller sets stands.
+#[test]
+fn the_budget_of_runs_follows_the_records_length() {
+    use super::Options;
+    use super::confirm::{CONFIRM_BUDGET_S, CONFIRM_RUNS};
+    let o = Options::default();
+    assert_eq!((CONFIRM_BUDGET_S, CONFIRM_RUNS), (120.0, 2));
+    let runs: Vec<usize> = [60.0, 20.0, 30.0, 40.0, 19.99, 300.0, 0.0, f64::NAN]
+        .iter()
+        .map(|&d| o.confirm_runs_for(d))
+        .collect();
+    assert_eq!(runs, [2, 6, 4, 3, 6, 2, 2, 2]);
+    let set = Options {
+        confirm_runs: Some(1),
+        ..Options::default()
+    };
+    assert_eq!(set.confirm_runs_for(20.0), 1);
+}

@@ -5,8 +5,9 @@
 //! beat scan's chance level (`vibration_at_noise`). An effect: the best candidate is
 //! significant and closes at least [`SHARE_MIN`] of what the floor closes, and it (with a
 //! second effect on top, if one adds at least [`SECOND_MIN`]) leaves at most
-//! [`UNEXPLAINED_MAX`] of the gap above the noise, and no row holding a share of the gap
-//! mostly unexplained. `unknown`: a gap no library effect explains.
+//! [`UNEXPLAINED_MAX`] of the gap above the noise (at the noise, where `none` is judged,
+//! there is none to leave), and no row holding a share of the gap mostly unexplained.
+//! `unknown`: a gap no library effect explains.
 
 use std::fmt;
 use std::str::FromStr;
@@ -230,8 +231,11 @@ pub(crate) fn decide(
         .iter()
         .find(|c| vibration_at_noise(c, fit_s, &cols.dither_hz))
         .map(|c| c.effect);
+    // the record at its own noise: nothing above it for a verdict to explain (a share of
+    // the few per cent above it would be the noise estimate's own scatter)
+    let at_noise = gap_fraction < GAP_MIN && residual_over_noise <= NONE_NOISE_MAX;
     let closest = match ranking.first() {
-        _ if gap_fraction < GAP_MIN && residual_over_noise <= NONE_NOISE_MAX => face_named
+        _ if at_noise => face_named
             .or(tone_named)
             .map_or(Answer::None, Answer::Effect),
         _ if gap_fraction < GAP_MIN => Answer::Unknown,
@@ -254,11 +258,7 @@ pub(crate) fn decide(
     let after_fit = fits.bank.fit(&cols.with(&verdict_cols));
     // the verdict must explain the gap above the noise, not just most of what the floor does
     let noise_e = noise_row * hold_rows;
-    let unexplained = if e0 > noise_e {
-        ((after_fit.e_hold - noise_e) / (e0 - noise_e)).max(0.0)
-    } else {
-        0.0
-    };
+    let unexplained = unexplained_share(e0, after_fit.e_hold, noise_e, at_noise);
     let unexplained_rows = if verdict_cols.is_empty() {
         Vec::new()
     } else {
@@ -291,6 +291,18 @@ pub(crate) fn decide(
         unexplained,
         unexplained_rows,
         gap_fraction,
+    }
+}
+
+/// The share of the held-out gap above the noise (`e0` the calibrated model's held-out
+/// energy, `noise_e` the noise's) that an answer leaving `after` does not explain; none
+/// when the record is at its noise (`at_noise`: what is above it there is within the
+/// noise estimate's own scatter, and a share of it is that scatter's) or below it.
+fn unexplained_share(e0: f64, after: f64, noise_e: f64, at_noise: bool) -> f64 {
+    if e0 > noise_e && !at_noise {
+        ((after - noise_e) / (e0 - noise_e)).max(0.0)
+    } else {
+        0.0
     }
 }
 
@@ -391,8 +403,21 @@ fn unexplained_rows(
 
 #[cfg(test)]
 mod tests {
-    use super::{Candidate, vibration_at_noise};
+    use super::{Candidate, unexplained_share, vibration_at_noise};
     use paragyro_simulator::effects::Effect;
+
+    /// Refsim seed 2222's 0033 (development): a vibration of 28.6 °/s named at the noise,
+    /// the record 1.047× its noise, the vibration leaving 1.014× it: 30 % of the 4.7 %
+    /// above the noise, the noise estimate's own scatter. At the noise no share is left to
+    /// explain; above it the share stands.
+    #[test]
+    fn at_the_noise_no_share_of_the_gap_is_left_unexplained() {
+        let (e0, after, noise) = (1.047, 1.014, 1.0);
+        assert!((unexplained_share(e0, after, noise, false) - 0.298).abs() < 1e-3);
+        assert_eq!(unexplained_share(e0, after, noise, true), 0.0);
+        assert!((unexplained_share(3.0, 1.5, noise, false) - 0.25).abs() < 1e-12);
+        assert_eq!(unexplained_share(0.9, 0.8, noise, false), 0.0);
+    }
 
     fn vibration_at_noise_no_dither(c: &Candidate, fit_s: f64) -> bool {
         vibration_at_noise(c, fit_s, &[])
