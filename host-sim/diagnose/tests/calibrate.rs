@@ -8,10 +8,8 @@
 use paragyro_diagnose::blind::device::DeviceDraw;
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::calibrate::ParamDeviation;
-use paragyro_diagnose::diagnose::confirm::HOPELESS_UNEXPLAINED;
 use paragyro_diagnose::diagnose::{
-    CALIBRATION_MAX_RESIMULATIONS, CALIBRATION_RESIMULATIONS, Options, Report, SHARE_MIN, T_SIG,
-    diagnose,
+    CALIBRATION_RESIMULATIONS, Options, Report, SHARE_MIN, T_SIG, diagnose,
 };
 use paragyro_simulator::record::{RecordOptions, simulate_record_with};
 use paragyro_simulator::scenario::Scenario;
@@ -199,28 +197,19 @@ fn a_softening_the_linear_test_leaves_unknown_is_confirmed_by_resimulation() {
     assert!(c.residual_over_noise < 1.1, "{c:?}");
 }
 
-/// A large force leak (7e-4, 70× its detection limit) on a toleranced device: its column is
-/// linear about a calibration that absorbed part of it, the catch-all explains 21 % of a
-/// held-out gap 1 100× the noise, and the linear test says `unknown`. Re-simulated with the
-/// leak at its fitted size (within 0.1 %) on the model recalibrated with it, the record is
-/// at its noise: the leak is the verdict.
+/// A large force leak (7e-4, 70× its detection limit) on a toleranced device whose drive
+/// collapses and grows back under the pump's steps: with the re-simulation on the record's
+/// branch after each collapse (`resim::on_record_branch`) the linear test names it at its
+/// size, without a re-simulation of the effect. (With the re-simulation's regrowths on
+/// branches of their own it read `unknown` there, and the confirmation named it.)
 #[test]
-fn a_large_force_leak_is_confirmed_by_resimulation() {
+fn a_large_force_leak_is_named_at_its_size() {
     let sc0 = Scenario::load("characterise").unwrap();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(300);
     let sc = DeviceDraw::draw(&mut rng).apply(&sc0);
     let r = diagnosed(&sc, &["force_leak=7e-4"], 21);
     assert_eq!(r.verdict.to_string(), "force_leak", "{:?}", r.confirmation);
-    let c = r.confirmation.last().expect("re-simulated");
-    assert!(c.confirmed && c.effect.starts_with("force_leak"), "{c:?}");
-    assert!(c.residual_over_noise < 1.1, "{c:?}");
-    // the record's noise against the run with the leak, not the inflated one without it
-    assert!(
-        c.noise_energy_ratio < 0.5 * r.parameter_face.noise_energy_ratio,
-        "{} vs {}",
-        c.noise_energy_ratio,
-        r.parameter_face.noise_energy_ratio
-    );
+    assert!(r.confirmation.is_empty(), "{:?}", r.confirmation);
     let size = r
         .ranking
         .iter()
@@ -330,25 +319,23 @@ fn a_large_thermal_drift_is_named_at_its_size_by_the_linear_test() {
 }
 
 /// The bench's slowest-path record (60 s, a force leak at 7e-4 and a Coulomb friction no
-/// library effect explains) with the calibration's usual two steps
-/// (`calibration_steps`; by default it has not converged after them and takes the
-/// confirmation's runs, the next test): the linear test leaves `unknown`, the force leak and the
-/// pump-driven softening go to the confirmation, and each run at its linear size leaves
-/// more of the held-out gap than the calibrated model without it (90× and 174×, on the
-/// sense 1st-harmonic rows), while its first Gauss–Newton step reverses its size (the
-/// leak to −1.3e-3, the softening to +4.3e-5). Both are rejected on that first run
-/// (`confirm::hopeless`): two re-simulations instead of six. Taken, the steps oscillate
-/// (the leak +6.8e-4 → −1.3e-3 → +6.9e-4, leaving 90×, 8.3×, 92× the gap) and reject
-/// both all the same.
+/// library effect explains) with the defaults: the calibration converges in its usual two
+/// steps, the linear test leaves `unknown`, and the force leak and the pump-driven softening
+/// go to the confirmation, one run each (the budget's two on a 60 s record: the first
+/// candidate's steps stop for the second's run), neither passing: four whole-record runs
+/// in all, and `unknown`. The force leak's run leaves 11 % of the gap above the noise,
+/// 5.9× the noise: the friction's.
 #[test]
-fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
+fn the_slowest_path_records_two_candidates_take_the_budgets_two_runs() {
     let rec = slowest_path_record().unwrap();
-    let opts = Options {
-        calibration_steps: CALIBRATION_RESIMULATIONS,
-        ..Options::default()
-    };
-    let r = diagnose(&rec, &opts).unwrap().report;
+    let r = diagnose(&rec, &Options::default()).unwrap().report;
     assert_eq!(r.verdict.to_string(), "unknown", "{:?}", r.confirmation);
+    assert_eq!(
+        r.parameter_face.resimulations,
+        1 + CALIBRATION_RESIMULATIONS,
+        "{:?}",
+        r.limitations
+    );
     let tested: Vec<&str> = r
         .confirmation
         .iter()
@@ -356,92 +343,37 @@ fn candidates_whose_first_step_reverses_them_are_rejected_after_one_run() {
         .collect();
     assert_eq!(tested, ["force_leak", "electrostatic_softening"]);
     for c in &r.confirmation {
-        println!("{} {:?}", c.effect, c.runs);
+        println!("{} {:?} {:?}", c.effect, c.runs, c.stopped);
         assert!(!c.confirmed, "{c:?}");
         assert_eq!(c.runs.len(), 1, "{c:?}");
-        assert!(c.unexplained > HOPELESS_UNEXPLAINED, "{c:?}");
     }
-}
-
-/// The same record with the defaults: after the calibration's two steps the next would
-/// still move a θ by more than its σ, so the calibration takes further steps from the
-/// confirmation's budget (four in all, the budget spent), and with no run left the
-/// confirmation makes none: four whole-record runs, as with the two candidates above. The
-/// report says which candidates went untested for that (a limitation), the ones the test
-/// above re-simulates.
-#[test]
-fn a_calibration_that_has_not_converged_takes_the_confirmations_runs() {
-    let rec = slowest_path_record().unwrap();
-    let r = diagnose(&rec, &Options::default()).unwrap().report;
-    assert_eq!(r.verdict.to_string(), "unknown", "{:?}", r.limitations);
-    assert_eq!(
-        r.parameter_face.resimulations,
-        1 + CALIBRATION_MAX_RESIMULATIONS,
-        "{:?}",
-        r.limitations
-    );
-    assert!(r.confirmation.is_empty(), "{:?}", r.confirmation);
-    assert!(!r.timing_s.contains_key("resimulate_to_confirm"));
-    let said = r
-        .limitations
-        .iter()
-        .find(|l| l.stage == "confirmation")
-        .unwrap_or_else(|| panic!("no confirmation limitation: {:?}", r.limitations));
-    assert!(
-        said.detail
-            .starts_with("force_leak, electrostatic_softening not re-simulated"),
-        "{}",
-        said.detail
-    );
+    assert!(r.timing_s.contains_key("resimulate_to_confirm"));
 }
 
 /// A large geometric nonlinearity (−5e-6, 50× its detection limit) on a toleranced
-/// device: its linear column about a calibration that absorbed part of it fits its size
-/// within 0.04 % (|size|/σ ≈ 1 300) yet
-/// extrapolates badly to the held-out span (its held-out closure negative), so it is not
-/// among the candidates that close [`SHARE_MIN`] of the explainable gap. The one that does,
-/// a thermal drift, is re-simulated first and rejected; the confirmation's second place
-/// then goes to the most significant of the rest, the nonlinearity, whose run brings the
-/// record to its noise (the thermal drift's run, with the nonlinearity fitted linearly about
-/// it, leaves the record far above its noise: not a pair, `CONFIRM_NOISE_MAX`).
+/// device: its linear column about the calibration fits its size within 0.04 %
+/// (|size|/σ ≈ 1 300) and, with the re-simulation on the record's branch after each of the
+/// drive's collapses, closes the held-out gap: the linear test names the nonlinearity at
+/// its size, without a re-simulation of the effect.
+/// (With the re-simulation's regrowths on branches of their own its held-out closure was
+/// negative, and the confirmation's second place named it.)
 #[test]
-fn a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation() {
+fn a_large_geometric_nonlinearity_is_named_at_its_size() {
     let sc0 = Scenario::load("characterise").unwrap();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(300);
     let sc = DeviceDraw::draw(&mut rng).apply(&sc0);
     let r = diagnosed(&sc, &["geometric_nonlinearity=-5e-6"], 21);
-    let gn = r
-        .ranking
-        .iter()
-        .find(|c| c.effect.to_string() == "geometric_nonlinearity")
-        .unwrap();
+    assert_eq!(r.verdict.to_string(), "geometric_nonlinearity");
+    assert!(r.verdict.secondary().is_none(), "{:?}", r.verdict);
+    assert!(r.confirmation.is_empty(), "{:?}", r.confirmation);
+    let gn = r.ranking.first().unwrap();
+    assert_eq!(gn.effect.to_string(), "geometric_nonlinearity");
     let (size, sd) = (gn.size.unwrap(), gn.size_sigma.unwrap());
-    println!(
-        "linear: {size:e} ± {sd:e}, held-out closure {:.3}",
-        gn.gap_closure
-    );
-    // what the case is: significant, but short of the share the first picks need
     assert!(
-        size.abs() / sd >= T_SIG && gn.gap_closure < SHARE_MIN,
+        size.abs() / sd >= T_SIG && gn.gap_closure >= SHARE_MIN,
         "{gn:?}"
     );
-    let tested: Vec<&str> = r
-        .confirmation
-        .iter()
-        .map(|c| c.effect.split('=').next().unwrap_or(""))
-        .collect();
-    assert_eq!(tested, ["thermal_drift", "geometric_nonlinearity"]);
-    assert!(!r.confirmation[0].confirmed, "{:?}", r.confirmation[0]);
-    // the thermal drift's run (1 285× the noise) with the nonlinearity fitted linearly
-    // about it leaves a small share of that gap, but not the record at its noise: no pair
-    // (the record holds no thermal drift), and the nonlinearity's own run is the verdict
-    assert!(r.confirmation[0].with.is_none(), "{:?}", r.confirmation[0]);
-    assert!(r.verdict.secondary().is_none(), "{:?}", r.verdict);
-    let c = &r.confirmation[1];
-    assert!(c.confirmed && c.residual_over_noise < 1.1, "{c:?}");
-    assert_eq!(r.verdict.to_string(), "geometric_nonlinearity");
-    let fitted: f64 = c.effect["geometric_nonlinearity=".len()..].parse().unwrap();
-    assert!((fitted + 5e-6).abs() < 0.01 * 5e-6, "{fitted}");
+    assert!((size + 5e-6).abs() < 0.01 * 5e-6, "{size}");
 }
 
 /// Two effects at once (issue 31): a thermal drift of −0.58 and a feedthrough of −2.7e-4

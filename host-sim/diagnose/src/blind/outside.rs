@@ -190,7 +190,7 @@ impl std::fmt::Display for Outside {
 
 /// The diagnosis's slowest path on a 60 s record (benches/diagnose.rs's second function,
 /// `examples/slowest.rs`, tests/calibrate.rs): the toleranced device of
-/// `a_large_force_leak_is_confirmed_by_resimulation` (device seed 300, noise seed 21) with
+/// `a_large_force_leak_is_named_at_its_size` (device seed 300, noise seed 21) with
 /// its force leak of 7e-4, recorded for 60 s of `characterise`, and a Coulomb friction of
 /// 5e-7 (5× its stated limit) that no library effect explains. The linear test leaves
 /// `unknown`; the force leak and the pump-driven electrostatic softening both qualify for

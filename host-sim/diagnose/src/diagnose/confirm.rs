@@ -352,9 +352,10 @@ fn named(
 /// (the largest |size|/σ, at least [`T_SIG`]) whatever its held-out closure: a large
 /// effect's linear column about a calibration that absorbed part of it can fit its size
 /// well on the fit span and still extrapolate badly to the held-out span (a geometric
-/// nonlinearity of −5e-6 on a toleranced device, tests/calibrate.rs,
-/// `a_significant_candidate_that_extrapolates_badly_is_confirmed_by_resimulation`: its
-/// size fitted within 0.04 %, |size|/σ 1 340, held-out closure −0.63). The
+/// nonlinearity of −5e-6 on a toleranced device whose re-simulation regrew the drive on
+/// branches of its own, at `9dbf610`: its size fitted within 0.04 %, |size|/σ 1 340,
+/// held-out closure −0.63; on the record's branch the linear test names it, test
+/// `a_large_geometric_nonlinearity_is_named_at_its_size`). The
 /// confirmation's rules judge such a candidate as any other: on development blind seed 2
 /// the 100 verdicts are the same with and without this second rule (30 runs on 27
 /// candidates against 21 on 18).
