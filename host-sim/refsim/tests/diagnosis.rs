@@ -37,3 +37,89 @@ fn a_clean_device_through_a_rate_table_reversal_reads_none() {
         report.ranking
     );
 }
+
+/// The calibrated model's prediction spread peaks at the regrowth after the drive's deep
+/// collapse: a clean device of run 22 (refsim seed 2323's record 0084, development since that
+/// run) whose drive collapses and grows back after its pump-amplitude step, the record
+/// shortened to 12 s with its protocol moved 5 s earlier and without its reversal. The
+/// twins' θ move by draws from the calibration's covariance; where the drive has grown back
+/// from under 1 % of its working amplitude the trajectory amplifies that move many times
+/// over what it is elsewhere in the held-out span (host-sim/diagnose/docs/notes.md, "The
+/// model's prediction spread at the drive's regrowths").
+#[test]
+fn the_prediction_spread_peaks_where_the_drive_grows_back_from_a_deep_collapse() {
+    use paragyro_diagnose::diagnose::spread::prediction_spread;
+    use paragyro_simulator::lockin::LockinExt;
+    let mut d = draw(100, 2323, 20.0, 0.4).remove(84);
+    assert_eq!(d.category, Category::None);
+    let p = &mut d.protocol;
+    p.duration_s = 12.0;
+    p.reversal = None;
+    p.dither_start_s -= 0.5;
+    for st in &mut p.scale_steps {
+        st.t_s -= 5.0;
+    }
+    let sim = d.simulate(4, 150.0, 1e-9).unwrap();
+    let text = to_text(&d.header(4, 150.0), &sim.rows);
+    let rec = paragyro_simulator::record::parse_record(&text, "refsim collapse").unwrap();
+    let ps = prediction_spread(&rec, &Options::default(), 3, 7).unwrap();
+    let amp: Vec<f64> =
+        ps.t.iter()
+            .map(|t| {
+                let k = (t * rec.header.fs_hz).round() as usize;
+                rec.rows[k].lockin.x_abs(1)
+            })
+            .collect();
+    let hold: Vec<usize> = (0..ps.t.len())
+        .filter(|&i| ps.t[i] >= ps.hold_start_s)
+        .collect();
+    let mut s: Vec<f64> = hold.iter().map(|&i| ps.spread[i][0]).collect();
+    s.sort_by(f64::total_cmp);
+    let median = s[s.len() / 2];
+    let widest = hold
+        .iter()
+        .copied()
+        .max_by(|&a, &b| ps.spread[a][0].total_cmp(&ps.spread[b][0]))
+        .unwrap();
+    let worst = hold
+        .iter()
+        .copied()
+        .max_by(|&a, &b| ps.departure[a][0].total_cmp(&ps.departure[b][0]))
+        .unwrap();
+    let collapses: Vec<f64> = hold
+        .iter()
+        .copied()
+        .filter(|&i| amp[i] < 0.01 * ps.working_um)
+        .map(|i| ps.t[i])
+        .collect();
+    // the widest spread follows a collapse of the record's drive in the held-out span
+    // (its regrowth), and is far wider than the span's median
+    assert!(
+        collapses
+            .iter()
+            .any(|&t| ps.t[widest] >= t && ps.t[widest] - t <= 0.5),
+        "widest spread {:.3e} µm at {:.3} s, collapses at {:?}",
+        ps.spread[widest][0],
+        ps.t[widest],
+        collapses.first().zip(collapses.last())
+    );
+    assert!(
+        ps.spread[widest][0] >= 100.0 * median,
+        "widest spread {:.3e} µm against the median {median:.3e} µm",
+        ps.spread[widest][0]
+    );
+    // the record departs from the model most at that regrowth, by a few spreads at most:
+    // the calibrated model's own uncertainty, not an effect
+    assert!(
+        (ps.t[worst] - ps.t[widest]).abs() <= 0.1,
+        "the record departs most at {:.3} s, the spread is widest at {:.3} s",
+        ps.t[worst],
+        ps.t[widest]
+    );
+    assert!(
+        ps.departure[worst][0] <= 4.0 * ps.spread[worst][0],
+        "departure {:.3e} µm against the spread there {:.3e} µm",
+        ps.departure[worst][0],
+        ps.spread[worst][0]
+    );
+}

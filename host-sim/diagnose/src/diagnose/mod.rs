@@ -70,6 +70,7 @@ pub mod rank;
 pub mod report;
 pub mod resim;
 pub mod rows;
+pub mod spread;
 pub mod verdict;
 pub mod vibration;
 
