@@ -511,6 +511,11 @@ pub(crate) fn calibration(
     }
     if let Some(why) = rows.regrowth_note() {
         limits.push(report::Limitation::new("regrowth", why));
+    } else if let Some((share, time)) = drive_departure_at_regrowths(rec, &rows, &spans) {
+        limits.push(report::Limitation::new(
+            "regrowth",
+            rows::regrowth_departure_note(share, time),
+        ));
     }
     // the steps beyond the usual ones were the confirmation's
     opts_cal.confirm_runs = Some(
@@ -518,6 +523,24 @@ pub(crate) fn calibration(
             .saturating_sub(steps.saturating_sub(CALIBRATION_RESIMULATIONS)),
     );
     Ok((rows, spans, opts_cal, fit, steps))
+}
+
+/// [`rows::regrowth_departure`] of the record's drive against the calibrated model's
+/// re-simulation over the held-out span (`None` without the re-simulation).
+fn drive_departure_at_regrowths(
+    rec: &Record,
+    rows: &rows::Rows,
+    spans: &rows::Spans,
+) -> Option<(f64, f64)> {
+    use paragyro_simulator::lockin::LockinExt;
+    let sim = rows.before_sim.as_ref()?;
+    let x1 = |l: &paragyro_simulator::lockin::LockinOut| {
+        let c = l.to_channels();
+        (c[1], c[2])
+    };
+    let r: Vec<(f64, f64)> = rec.rows.iter().map(|row| x1(&row.lockin)).collect();
+    let m: Vec<(f64, f64)> = sim.iter().map(x1).collect();
+    rows::regrowth_departure(&r, &m, spans.hold.clone(), rows.fs)
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
