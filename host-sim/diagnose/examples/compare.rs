@@ -8,7 +8,6 @@
 //! regrowths after the drive's deep collapses (docs/notes.md, "Clean devices through a
 //! collapse").
 
-use paragyro_simulator::lockin::LockinExt;
 use paragyro_simulator::record::{Record, read_record};
 use std::path::Path;
 
@@ -17,8 +16,8 @@ fn phasors(rec: &Record) -> Vec<([f64; 2], [f64; 2])> {
     rec.rows
         .iter()
         .map(|r| {
-            let c = r.lockin.to_channels();
-            ([c[1], c[2]], [c[8], c[9]])
+            let (x, y) = (r.lockin.x_um[0], r.lockin.y_um[0]);
+            ([x.re, x.im], [y.re, y.im])
         })
         .collect()
 }
@@ -46,7 +45,7 @@ fn main() -> anyhow::Result<()> {
         b.rows.len()
     );
     let (pa_, pb_) = (phasors(&a), phasors(&b));
-    let mut amp: Vec<f64> = pa_.iter().map(|(x, _)| x[0].hypot(x[1])).collect();
+    let amp: Vec<f64> = pa_.iter().map(|(x, _)| x[0].hypot(x[1])).collect();
     let working = {
         let mut s = amp.clone();
         s.sort_by(f64::total_cmp);
@@ -65,13 +64,10 @@ fn main() -> anyhow::Result<()> {
         depth: f64,
     }
     let mut wins = Vec::new();
-    for (k, chunk) in (0..a.rows.len())
-        .collect::<Vec<_>>()
-        .chunks(per)
-        .enumerate()
-    {
+    for k0 in (0..a.rows.len()).step_by(per) {
+        let chunk = k0..(k0 + per).min(a.rows.len());
         let (mut sx, mut mx, mut sy, mut my, mut depth) = (0.0, 0.0f64, 0.0, 0.0f64, f64::MAX);
-        for &i in chunk {
+        for i in chunk.clone() {
             let dx = dist(pa_[i].0, pb_[i].0);
             let dy = dist(pa_[i].1, pb_[i].1);
             sx += dx * dx;
@@ -82,7 +78,7 @@ fn main() -> anyhow::Result<()> {
         }
         let n = chunk.len() as f64;
         wins.push(Win {
-            t0: a.rows[k * per].t_s,
+            t0: a.rows[k0].t_s,
             rms_x: (sx / n).sqrt(),
             max_x: mx,
             rms_y: (sy / n).sqrt(),
@@ -90,12 +86,13 @@ fn main() -> anyhow::Result<()> {
             depth,
         });
     }
-    amp.clear();
     let median = {
         let mut s: Vec<f64> = wins.iter().map(|w| w.rms_x).collect();
         s.sort_by(f64::total_cmp);
         s[s.len() / 2]
     };
+    // against the median window's rms
+    let rel = |v: f64| if median > 0.0 { v / median } else { f64::NAN };
     println!("working drive amplitude (A's 90th percentile of |A1|): {working:.4} µm");
     println!(
         "| t0, s | rms |ΔA1| | max |ΔA1| | rms |ΔB1| | max |ΔB1| | min |A1| / working | rms |ΔA1| / median window |"
@@ -110,11 +107,7 @@ fn main() -> anyhow::Result<()> {
             w.rms_y,
             w.max_y,
             w.depth,
-            if median > 0.0 {
-                w.rms_x / median
-            } else {
-                f64::NAN
-            }
+            rel(w.rms_x)
         );
     }
     if let Some(w) = wins.iter().max_by(|p, q| p.max_x.total_cmp(&q.max_x)) {
@@ -123,11 +116,7 @@ fn main() -> anyhow::Result<()> {
             w.max_x,
             w.t0,
             w.depth,
-            if median > 0.0 {
-                w.max_x / median
-            } else {
-                f64::NAN
-            }
+            rel(w.max_x)
         );
     }
     Ok(())

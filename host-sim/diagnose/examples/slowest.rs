@@ -3,8 +3,8 @@
 //! (`paragyro_diagnose::blind::outside::slowest_path_record`: 60 s, the linear test
 //! `unknown`) with the calibration held to its two steps (two candidates through the
 //! confirmation) and with the defaults (the calibration's further steps, where it has not
-//! converged, take the confirmation's runs), and prints each verdict, the calibration's passes, each
-//! candidate's runs (report.json's `confirmation`) and `timing_s`.
+//! converged, take the confirmation's runs), and prints each verdict, the calibration's
+//! passes, each candidate's runs (report.json's `confirmation`) and `timing_s`.
 
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::{CALIBRATION_RESIMULATIONS, Options, diagnose};

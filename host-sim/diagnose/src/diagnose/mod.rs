@@ -347,6 +347,16 @@ impl Options {
         })
     }
 
+    /// These options with the budget of whole-record runs resolved for `rec`'s length
+    /// ([`Options::confirm_runs_for`]), as [`diagnose`] runs them.
+    pub(crate) fn for_record(&self, rec: &Record) -> Options {
+        let duration_s = rec.rows.len() as f64 / rec.header.fs_hz;
+        Options {
+            confirm_runs: Some(self.confirm_runs_for(duration_s)),
+            ..self.clone()
+        }
+    }
+
     /// The budget of whole-record runs once [`diagnose`] has resolved it.
     pub(crate) fn runs(&self) -> usize {
         self.confirm_runs.unwrap_or(confirm::CONFIRM_RUNS)
@@ -526,20 +536,24 @@ pub(crate) fn calibration(
 }
 
 /// [`rows::regrowth_departure`] of the record's drive against the calibrated model's
-/// re-simulation over the held-out span (`None` without the re-simulation).
+/// re-simulation (in L0, taken to µm) over the held-out span (`None` without the
+/// re-simulation).
 fn drive_departure_at_regrowths(
     rec: &Record,
     rows: &rows::Rows,
     spans: &rows::Spans,
 ) -> Option<(f64, f64)> {
-    use paragyro_simulator::lockin::LockinExt;
     let sim = rows.before_sim.as_ref()?;
-    let x1 = |l: &paragyro_simulator::lockin::LockinOut| {
-        let c = l.to_channels();
-        (c[1], c[2])
-    };
-    let r: Vec<(f64, f64)> = rec.rows.iter().map(|row| x1(&row.lockin)).collect();
-    let m: Vec<(f64, f64)> = sim.iter().map(x1).collect();
+    let l0 = rec.header.l0_um;
+    let r: Vec<(f64, f64)> = rec
+        .rows
+        .iter()
+        .map(|row| (row.lockin.x_um[0].re, row.lockin.x_um[0].im))
+        .collect();
+    let m: Vec<(f64, f64)> = sim
+        .iter()
+        .map(|o| (o.x_um[0].re * l0, o.x_um[0].im * l0))
+        .collect();
     rows::regrowth_departure(&r, &m, spans.hold.clone(), rows.fs)
 }
 
@@ -563,11 +577,7 @@ pub fn diagnose(rec: &Record, opts: &Options) -> anyhow::Result<Diagnosis> {
     }
     let wall = Instant::now();
     // the budget of whole-record runs, for this record's length
-    let duration_s = rec.rows.len() as f64 / rec.header.fs_hz;
-    let opts = &Options {
-        confirm_runs: Some(opts.confirm_runs_for(duration_s)),
-        ..opts.clone()
-    };
+    let opts = &opts.for_record(rec);
     match diagnose_stages(rec, opts, wall) {
         Ok(d) => Ok(d),
         // a record the stages cannot take at all (shorter than 2 s, less than 1 s of

@@ -71,37 +71,28 @@ impl Resim<'_> {
 /// a change of branch negates, at their smallest), so that the change is no step in the
 /// rows. The second half starts from the record's state, on its branch.
 fn branch_stretches(rec: &Record, out: &[LockinOut], k0: usize, mid: usize) -> Vec<(usize, usize)> {
-    use super::rows::{COLLAPSE_END_SHARE, COLLAPSE_SHARE};
     let k1 = k0 + out.len();
-    let amp = |k: usize| rec.rows[k].lockin.x_um[0].abs();
     let odd = |o: &LockinOut| {
         [o.x_um[0], o.x_um[2], o.y_um[0], o.y_um[2]]
             .iter()
             .map(|v| v.re * v.re + v.im * v.im)
             .sum::<f64>()
     };
-    let mut a: Vec<f64> = (k0..k1).map(amp).filter(|v| v.is_finite()).collect();
-    a.sort_by(f64::total_cmp);
     let mut starts = vec![mid];
     if k0 == 0 {
         starts.push(0);
     }
-    if let Some(&working) = a.get(a.len().saturating_sub(1) * 9 / 10)
-        && working > 0.0
-    {
-        let (low, high) = (COLLAPSE_SHARE * working, COLLAPSE_END_SHARE * working);
-        let mut k = (k0..k1).find(|&k| amp(k) >= 0.5 * working).unwrap_or(k1);
-        while k < k1 {
-            if amp(k) < low {
-                let end = (k..k1).find(|&j| amp(j) > high).unwrap_or(k1);
-                let quiet = (k..end)
-                    .filter(|&j| odd(&out[j - k0]).is_finite())
-                    .min_by(|&i, &j| odd(&out[i - k0]).total_cmp(&odd(&out[j - k0])));
-                starts.extend(quiet);
-                k = end;
-            } else {
-                k += 1;
-            }
+    // the record's own collapses (its drive against itself)
+    let x1: Vec<(f64, f64)> = rec.rows[k0..k1]
+        .iter()
+        .map(|r| (r.lockin.x_um[0].re, r.lockin.x_um[0].im))
+        .collect();
+    if let Some((_, collapses)) = super::rows::collapses(&x1, &x1) {
+        for (a, b) in collapses {
+            let quiet = (k0 + a..k0 + b)
+                .filter(|&j| odd(&out[j - k0]).is_finite())
+                .min_by(|&i, &j| odd(&out[i - k0]).total_cmp(&odd(&out[j - k0])));
+            starts.extend(quiet);
         }
     }
     starts.sort_unstable();

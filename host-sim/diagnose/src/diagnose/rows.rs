@@ -260,8 +260,12 @@ pub(crate) fn unreproduced_regrowths(rec: &[(f64, f64)], sim: &[(f64, f64)]) -> 
 /// The record's drive working amplitude (the 90th percentile of its |x1|) and its collapses
 /// once it has built up (its start from rest is the model's): each from the record's or the
 /// re-simulation's drive under [`COLLAPSE_SHARE`] of it until both are over
-/// [`COLLAPSE_END_SHARE`] (start, end sample); `None` without a working amplitude.
-fn collapses(rec: &[(f64, f64)], sim: &[(f64, f64)]) -> Option<(f64, Vec<(usize, usize)>)> {
+/// [`COLLAPSE_END_SHARE`] (start, end sample); `None` without a working amplitude. With the
+/// record as both, the record's own collapses.
+pub(crate) fn collapses(
+    rec: &[(f64, f64)],
+    sim: &[(f64, f64)],
+) -> Option<(f64, Vec<(usize, usize)>)> {
     let n = rec.len().min(sim.len());
     let amp = |v: (f64, f64)| v.0.hypot(v.1);
     let mut a: Vec<f64> = rec[..n]

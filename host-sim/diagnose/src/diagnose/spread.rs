@@ -16,7 +16,7 @@
 //! -p paragyro-diagnose --example spread -- RECORD.csv` prints it window by window.
 
 use super::{Options, Timing, calibrate, calibration, resim::Resim};
-use paragyro_simulator::lockin::{LockinExt, LockinOut};
+use paragyro_simulator::lockin::LockinOut;
 use paragyro_simulator::record::Record;
 use rand::{Rng, SeedableRng};
 
@@ -39,10 +39,11 @@ pub struct PredictionSpread {
     pub draws: usize,
 }
 
-/// The drive's (`x1`) and the sense's (`y1`) 1st-harmonic phasors of a lock-in output.
-fn phasors(l: &LockinOut) -> [(f64, f64); 2] {
-    let c = l.to_channels();
-    [(c[1], c[2]), (c[8], c[9])]
+/// The drive's (`x1`) and the sense's (`y1`) 1st-harmonic phasors of a lock-in output,
+/// times `scale` (a re-simulation's are in L0: `scale` L0 in µm).
+fn phasors(l: &LockinOut, scale: f64) -> [(f64, f64); 2] {
+    let (x, y) = (l.x_um[0], l.y_um[0]);
+    [(x.re * scale, x.im * scale), (y.re * scale, y.im * scale)]
 }
 
 fn apart(a: (f64, f64), b: (f64, f64)) -> f64 {
@@ -56,20 +57,21 @@ fn normal(rng: &mut impl Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-/// A draw of `Δθ` from the covariance `cov` (14 × 14, row-major): `V·√Λ·z` from its
-/// eigen-decomposition (a covariance of rank below 14, as a cluster-robust one can be, draws
-/// in its range; a negative rounding of an eigenvalue counts as 0).
-fn draw(cov: &[f64], rng: &mut impl Rng) -> [f64; 14] {
-    let m = nalgebra::DMatrix::from_row_slice(14, 14, cov);
-    let eig = m.symmetric_eigen();
-    let z: Vec<f64> = (0..14).map(|_| normal(rng)).collect();
-    let mut d = [0.0; 14];
-    for (i, di) in d.iter_mut().enumerate() {
-        for (j, zj) in z.iter().enumerate() {
-            *di += eig.eigenvectors[(i, j)] * eig.eigenvalues[j].max(0.0).sqrt() * zj;
-        }
-    }
-    d
+/// The square root `V·√Λ` of the covariance `cov` (14 × 14, row-major) from its
+/// eigen-decomposition: a draw `root·z` has that covariance (a covariance of rank below 14,
+/// as a cluster-robust one can be, draws in its range; a negative rounding of an
+/// eigenvalue counts as 0).
+fn root(cov: &[f64]) -> nalgebra::DMatrix<f64> {
+    let eig = nalgebra::DMatrix::from_row_slice(14, 14, cov).symmetric_eigen();
+    let sqrt_l = eig.eigenvalues.map(|l| l.max(0.0).sqrt());
+    eig.eigenvectors * nalgebra::DMatrix::from_diagonal(&sqrt_l)
+}
+
+/// A draw of `Δθ`, `root·z` ([`root`]).
+fn draw(root: &nalgebra::DMatrix<f64>, rng: &mut impl Rng) -> [f64; 14] {
+    let z = nalgebra::DVector::from_fn(14, |_, _| normal(rng));
+    let d = root * z;
+    std::array::from_fn(|i| d[i])
 }
 
 /// The calibrated model's prediction spread on `rec` from `draws` twins (seeded by `seed`),
@@ -88,11 +90,7 @@ pub fn prediction_spread(
         opts.resimulate,
         "the prediction spread needs the re-simulation (not --no-resim)"
     );
-    let duration_s = rec.rows.len() as f64 / rec.header.fs_hz;
-    let opts = Options {
-        confirm_runs: Some(opts.confirm_runs_for(duration_s)),
-        ..opts.clone()
-    };
+    let opts = opts.for_record(rec);
     let mut timing = Timing::new();
     let mut limits = Vec::new();
     let (rows, spans, opts_cal, fit, _) = calibration(rec, &opts, &mut timing, &mut limits)?;
@@ -111,9 +109,10 @@ pub fn prediction_spread(
     // the model of the rows is the calibration's last re-simulated one, with the last
     // fit's refinement applied linearly: the twins move that model by draws about it
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let (root, l0) = (root(&fit.cov), rec.header.l0_um);
     let mut sq = vec![[0.0f64; 2]; span.len()];
     for i in 0..draws {
-        let dtheta = draw(&fit.cov, &mut rng);
+        let dtheta = draw(&root, &mut rng);
         let twin = calibrate::calibrated_model(
             &opts_cal.model,
             &rows,
@@ -137,7 +136,7 @@ pub fn prediction_spread(
         }
         .run(0..n)?;
         for (s, k) in sq.iter_mut().zip(span.clone()) {
-            let (m, w) = (phasors(&model_run[k]), phasors(&run[k]));
+            let (m, w) = (phasors(&model_run[k], l0), phasors(&run[k], l0));
             for c in 0..2 {
                 s[c] += apart(w[c], m[c]).powi(2);
             }
@@ -150,7 +149,10 @@ pub fn prediction_spread(
     let departure = span
         .clone()
         .map(|k| {
-            let (r, m) = (phasors(&rec.rows[k].lockin), phasors(&model_run[k]));
+            let (r, m) = (
+                phasors(&rec.rows[k].lockin, 1.0),
+                phasors(&model_run[k], l0),
+            );
             [apart(r[0], m[0]), apart(r[1], m[1])]
         })
         .collect();
@@ -158,7 +160,7 @@ pub fn prediction_spread(
         .rows
         .iter()
         .map(|r| {
-            let x = phasors(&r.lockin)[0];
+            let x = phasors(&r.lockin, 1.0)[0];
             x.0.hypot(x.1)
         })
         .filter(|a| a.is_finite())
@@ -180,7 +182,7 @@ pub fn prediction_spread(
 
 #[cfg(test)]
 mod tests {
-    use super::draw;
+    use super::{draw, root};
     use rand::SeedableRng;
 
     /// The draws have the covariance they are drawn from, a singular one included (a
@@ -197,8 +199,9 @@ mod tests {
         let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(3);
         let n = 4000;
         let mut s = vec![0.0; 14 * 14];
+        let r = root(&cov);
         for _ in 0..n {
-            let d = draw(&cov, &mut rng);
+            let d = draw(&r, &mut rng);
             for i in 0..14 {
                 for j in 0..14 {
                     s[i * 14 + j] += d[i] * d[j] / n as f64;
