@@ -636,6 +636,30 @@ impl BlockLpf {
         sums_push(&mut self.sums, &mixer_products(xm, ym, c1, s1));
     }
 
+    /// [`Self::push_mixed`], its AVX2 build inside the plant's AVX2 loop (`SIMD`,
+    /// [`crate::simd`]).
+    #[inline(always)]
+    pub(crate) fn push_mixed_in<const SIMD: bool>(&mut self, xm: f64, ym: f64, c1: f64, s1: f64) {
+        #[cfg(target_arch = "x86_64")]
+        if SIMD {
+            // SAFETY: `SIMD` only inside the plant's AVX2 loop, which runs where the CPU
+            // has AVX2 and FMA
+            #[allow(unsafe_code)]
+            unsafe {
+                self.push_mixed_avx2(xm, ym, c1, s1)
+            };
+            return;
+        }
+        self.push_mixed(xm, ym, c1, s1);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn push_mixed_avx2(&mut self, xm: f64, ym: f64, c1: f64, s1: f64) {
+        sums_push(&mut self.sums, &mixer_products(xm, ym, c1, s1));
+    }
+
     /// Adds an interior sample of the current block.
     #[inline(always)]
     pub fn push(&mut self, u: &[f64; NCH]) {
@@ -666,6 +690,29 @@ impl BlockLpf {
         }
         self.x = xn;
         sums_start(&mut self.sums, u);
+    }
+
+    /// [`Self::finish_block`], its AVX2 build inside the plant's AVX2 loop (`SIMD`,
+    /// [`crate::simd`]).
+    #[inline(always)]
+    pub(crate) fn finish_block_in<const SIMD: bool>(&mut self, u: &[f64; NCH]) {
+        #[cfg(target_arch = "x86_64")]
+        if SIMD {
+            // SAFETY: as in `push_mixed_in`
+            #[allow(unsafe_code)]
+            unsafe {
+                self.finish_block_avx2(u)
+            };
+            return;
+        }
+        self.finish_block(u);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn finish_block_avx2(&mut self, u: &[f64; NCH]) {
+        self.finish_block(u);
     }
 
     /// Filter outputs `y = C x` of all channels (valid at block boundaries).

@@ -308,152 +308,8 @@ fn rhs_fx(th: &Theta, z: &[f64; 4], d: &Drive, f: &Forcing, fx: &Effects) -> [f6
     [xd, xdd + dx, yd, ydd + dy]
 }
 
-/// Which effect terms the integrator carries (its `FX` parameter): none (eq. (6) alone),
-/// every term of [`rhs_fx`], or the terms of one plant effect alone ([`rhs_fx_one`]).
-mod terms {
-    /// Eq. (6) alone, [`super::measure`].
-    pub(super) const NONE: u8 = 0;
-    /// Every term of [`super::rhs_fx`], [`super::measure_fx`].
-    pub(super) const ALL: u8 = 1;
-    /// The pump feedthrough or the pick-off gain alone: eq. (6), [`super::measure_fx`].
-    pub(super) const MEASUREMENT: u8 = 2;
-    /// The geometric nonlinearity alone.
-    pub(super) const GEOMETRIC: u8 = 3;
-    /// The electrostatic softening alone.
-    pub(super) const ELECTROSTATIC: u8 = 4;
-    /// The nonlinear damping alone.
-    pub(super) const NL_DAMPING: u8 = 5;
-    /// The anisodamping alone.
-    pub(super) const ANISODAMPING: u8 = 6;
-    /// The force leak alone.
-    pub(super) const FORCE_LEAK: u8 = 7;
-}
-
-/// The terms of `fx` as one of [`terms`]: the plant terms of one effect alone (with at most
-/// the measurement effects, the runner's thermal drift and lock-in mismatch beside it),
-/// else [`terms::ALL`]. Decided by equality with that one effect's [`Effects`], so an
-/// effect added to [`rhs_fx`] later (a field of its own) runs the general path until it is
-/// given a variant here.
-fn terms_of(fx: &Effects) -> u8 {
-    if !fx.plant_active() {
-        return terms::NONE;
-    }
-    let base = Effects {
-        vib_beat_hz: fx.vib_beat_hz,
-        vib_phase0: fx.vib_phase0,
-        es_pump: fx.es_pump,
-        feedthrough: fx.feedthrough,
-        tcf_ppm_k: fx.tcf_ppm_k,
-        lockin_mismatch: fx.lockin_mismatch,
-        readout_gain: fx.readout_gain,
-        ..Effects::default()
-    };
-    if *fx == base {
-        return terms::MEASUREMENT;
-    }
-    let one = [
-        (
-            Effects {
-                geometric: fx.geometric,
-                ..base
-            },
-            terms::GEOMETRIC,
-        ),
-        (
-            Effects {
-                electrostatic: fx.electrostatic,
-                ..base
-            },
-            terms::ELECTROSTATIC,
-        ),
-        (
-            Effects {
-                nl_damping: fx.nl_damping,
-                ..base
-            },
-            terms::NL_DAMPING,
-        ),
-        (
-            Effects {
-                anisodamping: fx.anisodamping,
-                ..base
-            },
-            terms::ANISODAMPING,
-        ),
-        (
-            Effects {
-                force_leak: fx.force_leak,
-                ..base
-            },
-            terms::FORCE_LEAK,
-        ),
-    ];
-    one.iter()
-        .find(|(e, _)| e == fx)
-        .map_or(terms::ALL, |(_, t)| *t)
-}
-
-/// [`rhs_fx`] when `fx` carries the plant terms of one effect alone (`T`, [`terms_of`];
-/// the angular vibration off, so γv = γv' = 0): the same result, bit for bit. Each term of
-/// [`rhs_fx`] whose size is zero is ±0, and adding ±0 to a sum leaves it as it was (up to
-/// the sign of an exact zero, which no later sum or product turns into a different
-/// non-zero value), so the effect's own term, computed with the same operations, is what
-/// [`rhs_fx`] adds to eq. (6) (the anisodamping's `2γv − d/2` is `−(d/2)`, its
-/// `d/2 − 2γv` is `d/2`). Without the zero terms the sums are shorter: this is where the
-/// diagnosis's re-simulations of one effect spent ~25 % of their time (tests:
-/// `rhs_fx_one_is_rhs_fx_bit_for_bit`, `one_effect_runs_as_the_general_path`).
-#[inline(always)]
-fn rhs_fx_one<const T: u8>(
-    th: &Theta,
-    z: &[f64; 4],
-    d: &Drive,
-    f: &Forcing,
-    fx: &Effects,
-) -> [f64; 4] {
-    let [x, xd, y, yd] = *z;
-    let [_, xdd, _, ydd] = rhs(th, z, f);
-    match T {
-        terms::GEOMETRIC => [
-            xd,
-            xdd + -fx.geometric * y * (x * y + 2.0 * xd * yd),
-            yd,
-            ydd + fx.geometric * y * xd * xd,
-        ],
-        terms::ELECTROSTATIC => [
-            xd,
-            xdd,
-            yd,
-            ydd - fx.electrostatic
-                * (if fx.es_pump { d.s } else { 1.0 })
-                * y
-                * (1.0 + ES_C3 * (y * y)),
-        ],
-        terms::NL_DAMPING => [
-            xd,
-            xdd - fx.nl_damping * (x * x) * xd,
-            yd,
-            ydd - fx.nl_damping * (y * y) * yd,
-        ],
-        terms::ANISODAMPING => [
-            xd,
-            xdd + -(0.5 * fx.anisodamping) * yd,
-            yd,
-            ydd + (0.5 * fx.anisodamping) * xd,
-        ],
-        terms::FORCE_LEAK => {
-            let pump = d.s * (1.0 + d.cos2psi);
-            [
-                xd,
-                xdd,
-                yd,
-                ydd + fx.force_leak * pump * x * (th.drive[5] + th.drive[6] * (x * x)),
-            ]
-        }
-        // the measurement effects alone: eq. (6)
-        terms::MEASUREMENT => [xd, xdd, yd, ydd],
-        _ => rhs_fx(th, z, d, f, fx),
-    }
-}
+mod terms;
+use terms::{rhs_fx_one, terms_of};
 
 // =======================================================================================
 // THE MEASUREMENT: what the pick-off delivers to the lock-in mixers. Measurement effects
@@ -707,32 +563,65 @@ impl GyroSim {
     /// `steps_per_period` RK4 steps per carrier period. Never allocates, never fails
     /// (non-finite inputs propagate into the state).
     pub fn advance(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (detected at run time just above)
+            #[allow(unsafe_code)]
+            unsafe {
+                self.advance_avx2(theta, u0, u1)
+            };
+            return;
+        }
+        self.advance_with::<false>(theta, u0, u1);
+    }
+
+    /// [`GyroSim::advance`] compiled for AVX2 and FMA ([`crate::simd`]): the same
+    /// arithmetic in the same order, bit for bit (no contraction), on 4-wide vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn advance_avx2(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs) {
+        self.advance_with::<true>(theta, u0, u1);
+    }
+
+    /// The body of [`GyroSim::advance`]; `SIMD`: compiled inside [`Self::advance_avx2`]
+    /// (its out-of-line callees take their AVX2 builds).
+    #[inline(always)]
+    pub(crate) fn advance_with<const SIMD: bool>(
+        &mut self,
+        theta: &Theta,
+        u0: &PlantInputs,
+        u1: &PlantInputs,
+    ) {
         let noise = self.noise.sigma > 0.0;
         let chirp = u1.omega != u0.omega;
         const ALL: u8 = terms::ALL;
         const NONE: u8 = terms::NONE;
         if self.fx.hook.is_some() {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, ALL, true>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, ALL, true>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, ALL, true>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, ALL, true>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, ALL, true, SIMD>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, ALL, true, SIMD>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, ALL, true, SIMD>(theta, u0, u1),
+                (false, false) => self.run_interval::<false, false, ALL, true, SIMD>(theta, u0, u1),
             }
         } else if !noise && self.terms != ALL && self.terms != NONE {
-            self.advance_one(theta, u0, u1, chirp);
+            self.advance_one::<SIMD>(theta, u0, u1, chirp);
         } else if self.terms != NONE {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, ALL, false>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, ALL, false>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, ALL, false>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, ALL, false>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, ALL, false, SIMD>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, ALL, false, SIMD>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, ALL, false, SIMD>(theta, u0, u1),
+                (false, false) => {
+                    self.run_interval::<false, false, ALL, false, SIMD>(theta, u0, u1)
+                }
             }
         } else {
             match (noise, chirp) {
-                (true, true) => self.run_interval::<true, true, NONE, false>(theta, u0, u1),
-                (true, false) => self.run_interval::<true, false, NONE, false>(theta, u0, u1),
-                (false, true) => self.run_interval::<false, true, NONE, false>(theta, u0, u1),
-                (false, false) => self.run_interval::<false, false, NONE, false>(theta, u0, u1),
+                (true, true) => self.run_interval::<true, true, NONE, false, SIMD>(theta, u0, u1),
+                (true, false) => self.run_interval::<true, false, NONE, false, SIMD>(theta, u0, u1),
+                (false, true) => self.run_interval::<false, true, NONE, false, SIMD>(theta, u0, u1),
+                (false, false) => {
+                    self.run_interval::<false, false, NONE, false, SIMD>(theta, u0, u1)
+                }
             }
         }
         if self.vib_omega != 0.0 {
@@ -742,16 +631,56 @@ impl GyroSim {
 
     /// [`GyroSim::advance`] of a noise-free run with one plant effect alone ([`terms_of`]; the
     /// diagnosis's re-simulations): that effect's own terms ([`rhs_fx_one`]), the same
-    /// result as the general effect path. Kept out of `advance` (not inlined there), which
-    /// then compiles as it did without these variants.
+    /// result as the general effect path. Dispatches to an out-of-line body
+    /// (`advance_one_portable` or `advance_one_avx2`), so `advance` compiles as it did without
+    /// these variants.
+    #[inline(always)]
+    fn advance_one<const SIMD: bool>(
+        &mut self,
+        theta: &Theta,
+        u0: &PlantInputs,
+        u1: &PlantInputs,
+        chirp: bool,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if SIMD {
+            // SAFETY: `SIMD` only inside `advance_avx2`, which runs where the CPU has
+            // AVX2 and FMA
+            #[allow(unsafe_code)]
+            unsafe {
+                self.advance_one_avx2(theta, u0, u1, chirp)
+            };
+            return;
+        }
+        self.advance_one_portable(theta, u0, u1, chirp);
+    }
+
     #[inline(never)]
-    fn advance_one(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs, chirp: bool) {
+    fn advance_one_portable(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs, c: bool) {
+        self.advance_one_with::<false>(theta, u0, u1, c);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn advance_one_avx2(&mut self, theta: &Theta, u0: &PlantInputs, u1: &PlantInputs, c: bool) {
+        self.advance_one_with::<true>(theta, u0, u1, c);
+    }
+
+    #[inline(always)]
+    fn advance_one_with<const SIMD: bool>(
+        &mut self,
+        theta: &Theta,
+        u0: &PlantInputs,
+        u1: &PlantInputs,
+        chirp: bool,
+    ) {
         macro_rules! run_one {
             ($fx:expr) => {
                 if chirp {
-                    self.run_interval::<false, true, { $fx }, false>(theta, u0, u1)
+                    self.run_interval::<false, true, { $fx }, false, SIMD>(theta, u0, u1)
                 } else {
-                    self.run_interval::<false, false, { $fx }, false>(theta, u0, u1)
+                    self.run_interval::<false, false, { $fx }, false, SIMD>(theta, u0, u1)
                 }
             };
         }
@@ -792,7 +721,13 @@ impl GyroSim {
     /// The hot loop: `M/m` lock-in blocks of `m` RK4 steps each (`m` = 32 by default).
     /// `HOOK`: with the external term of `fx.hook` (its force, states and pick-off offset).
     #[inline(always)]
-    fn run_interval<const NOISE: bool, const CHIRP: bool, const FX: u8, const HOOK: bool>(
+    fn run_interval<
+        const NOISE: bool,
+        const CHIRP: bool,
+        const FX: u8,
+        const HOOK: bool,
+        const SIMD: bool,
+    >(
         &mut self,
         theta: &Theta,
         u0: &PlantInputs,
@@ -879,7 +814,7 @@ impl GyroSim {
                 if i > 0 {
                     let n = self.noise.draw::<NOISE>();
                     let [xm, ym] = meas(&z, &hw, tau, n, rc, rs, &da);
-                    self.lpf.push_mixed(xm, ym, rc, rs);
+                    self.lpf.push_mixed_in::<SIMD>(xm, ym, rc, rs);
                 }
                 let (hc, hs) = ch.step::<CHIRP>();
                 let (gv, gvd) = if FX == terms::ALL {
@@ -923,7 +858,8 @@ impl GyroSim {
             // block junction sample (also the first sample of the next block)
             let n = self.noise.draw::<NOISE>();
             let [xm, ym] = meas(&z, &hw, tau, n, rc, rs, &da);
-            self.lpf.finish_block(&mixer_products(xm, ym, rc, rs));
+            self.lpf
+                .finish_block_in::<SIMD>(&mixer_products(xm, ym, rc, rs));
         }
         self.z = z;
         self.w = hw;
