@@ -670,6 +670,13 @@ impl BlockLpf {
     /// starts the next block with the same sample.
     #[inline]
     pub fn finish_block(&mut self, u: &[f64; NCH]) {
+        self.finish_block_body(u);
+    }
+
+    /// The body of [`Self::finish_block`], inlined into both builds (a plain `#[inline]`
+    /// call from the AVX2 one stays a call to the baseline code).
+    #[inline(always)]
+    fn finish_block_body(&mut self, u: &[f64; NCH]) {
         sums_end(&mut self.sums, u);
         let d = &self.d;
         let n = d.n;
@@ -712,7 +719,7 @@ impl BlockLpf {
     #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
     fn finish_block_avx2(&mut self, u: &[f64; NCH]) {
-        self.finish_block(u);
+        self.finish_block_body(u);
     }
 
     /// Filter outputs `y = C x` of all channels (valid at block boundaries).
