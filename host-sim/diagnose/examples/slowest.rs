@@ -4,13 +4,21 @@
 //! `unknown`) with the calibration held to its two steps (two candidates through the
 //! confirmation) and with the defaults (the calibration's further steps, where it has not
 //! converged, take the confirmation's runs), and prints each verdict, the calibration's
-//! passes, each candidate's runs (report.json's `confirmation`) and `timing_s`.
+//! passes, each candidate's runs (report.json's `confirmation`) and `timing_s`; first, which
+//! build of the simulator's hot loop runs (host-sim/docs/benchmarks.md, "Build settings").
 
 use paragyro_diagnose::blind::outside::slowest_path_record;
 use paragyro_diagnose::diagnose::{CALIBRATION_RESIMULATIONS, Options, diagnose};
 
 fn main() -> anyhow::Result<()> {
     let rec = slowest_path_record()?;
+    // which build of the simulator's hot loop runs here (`PARAGYRO_SIMD=off`: the portable)
+    let build = if paragyro_simulator::simd::avx2_fma() {
+        "AVX2 + FMA"
+    } else {
+        "portable"
+    };
+    println!("the simulator's {build} build");
     let two_steps = Options {
         calibration_steps: CALIBRATION_RESIMULATIONS,
         ..Options::default()
