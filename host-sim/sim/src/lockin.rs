@@ -670,13 +670,6 @@ impl BlockLpf {
     /// starts the next block with the same sample.
     #[inline]
     pub fn finish_block(&mut self, u: &[f64; NCH]) {
-        self.finish_block_body(u);
-    }
-
-    /// The body of [`Self::finish_block`], inlined into both builds (a plain `#[inline]`
-    /// call from the AVX2 one stays a call to the baseline code).
-    #[inline(always)]
-    fn finish_block_body(&mut self, u: &[f64; NCH]) {
         sums_end(&mut self.sums, u);
         let d = &self.d;
         let n = d.n;
@@ -697,29 +690,6 @@ impl BlockLpf {
         }
         self.x = xn;
         sums_start(&mut self.sums, u);
-    }
-
-    /// [`Self::finish_block`], its AVX2 build inside the plant's AVX2 loop (`SIMD`,
-    /// [`crate::simd`]).
-    #[inline(always)]
-    pub(crate) fn finish_block_in<const SIMD: bool>(&mut self, u: &[f64; NCH]) {
-        #[cfg(target_arch = "x86_64")]
-        if SIMD {
-            // SAFETY: as in `push_mixed_in`
-            #[allow(unsafe_code)]
-            unsafe {
-                self.finish_block_avx2(u)
-            };
-            return;
-        }
-        self.finish_block(u);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline(never)]
-    fn finish_block_avx2(&mut self, u: &[f64; NCH]) {
-        self.finish_block_body(u);
     }
 
     /// Filter outputs `y = C x` of all channels (valid at block boundaries).
