@@ -82,6 +82,9 @@ fn budget(args: &[String]) -> anyhow::Result<bool> {
     let [elf, rest @ ..] = args else {
         anyhow::bail!("usage: paragyro-fil budget STM32F405_ELF [SUMMARY_JSON]");
     };
+    let image = std::fs::read(elf).map_err(|e| {
+        anyhow::anyhow!("{elf}: {e} (the stm32f405 image: `cargo fw-stm32` builds it)")
+    })?;
     let summary_path = rest
         .first()
         .map(PathBuf::from)
@@ -92,8 +95,9 @@ fn budget(args: &[String]) -> anyhow::Result<bool> {
             summary_path.display()
         )
     })?;
-    let summary: paragyro_fil::Summary = serde_json::from_str(&text)?;
-    let b = paragyro_fil::budget::check(&std::fs::read(elf)?, &summary)?;
+    let summary: paragyro_fil::Summary = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", summary_path.display()))?;
+    let b = paragyro_fil::budget::check(&image, &summary)?;
     use paragyro_fil::budget as bu;
     println!(
         "flash {} B (budget {} B); static RAM {} B + stack peak {} B = {} B (budget {} B)",

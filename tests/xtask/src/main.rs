@@ -11,10 +11,17 @@
 //! * `cargo xtask test --no-install` — run the tests as the machine is (the QEMU test then
 //!   fails with a message naming what is missing, or is skipped with `PARAGYRO_SKIP_QEMU=1`).
 //! * `cargo xtask setup` — only install.
+//! * `cargo xtask prepare` — only the installs that mostly wait on the network: the thumb
+//!   target, `qemu-system-arm`, `cc`/`c++`, and the Python tests' venv with its packages
+//!   (module [`python`]). `.ci/run` runs it beside the lints (the built binary, so that it
+//!   takes no cargo lock); `cargo xtask test` then finds them and installs only
+//!   `defmt-print`, whose build needs the CPU the lints use.
 //! * `cargo xtask fuzz [--secs N] [TARGET ...]` — the bounded libFuzzer run of `tests/fuzz`
 //!   (module [`fuzz`]); `cargo xtask test` builds its targets in the background while the
 //!   tests run and runs them after the tests, 20 s per target (`PARAGYRO_FUZZ_SECS` sets
-//!   another length, `PARAGYRO_SKIP_FUZZ=1` skips it).
+//!   another length, `PARAGYRO_SKIP_FUZZ=1` skips it; `PARAGYRO_FUZZ_DEFER=1` builds them
+//!   but leaves their run to a later `cargo xtask fuzz`: `.ci/run` runs it beside the
+//!   firmware step, whose QEMU runs and LTO links keep one core busy, not two).
 //! * `cargo xtask py [PYTEST ARGS]` — the Python package's tests alone (module [`python`]):
 //!   a venv `target/py-venv` with the pinned packages of `host-sim/py/requirements-test.txt`,
 //!   the package built into it with maturin, then pytest. `cargo xtask test` runs them after
@@ -46,6 +53,7 @@ fn main() -> ExitCode {
     let task = args.remove(0);
     let result = match task.as_str() {
         "setup" => setup(),
+        "prepare" => prepare(),
         "fuzz" => fuzz::fuzz(&args),
         "py" => python::test(&args),
         "test" => {
@@ -74,7 +82,9 @@ fn usage() -> &'static str {
      \x20 test [--no-install] [CARGO TEST ARGS]   install what the tests need, then `cargo test --workspace`\n\
      \x20                                         and the bounded libFuzzer run (tests/fuzz)\n\
      \x20 fuzz [--secs N] [TARGET ...]            the libFuzzer run alone (N s per target, default 20)\n\
-     \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print, cc, c++)"
+     \x20 setup                                   only install (thumb target, qemu-system-arm, defmt-print, cc, c++)\n\
+     \x20 prepare                                 only the network-bound installs (thumb target, qemu-system-arm,\n\
+     \x20                                         cc, c++, the Python tests' venv and packages)"
 }
 
 fn take_flag(args: &mut Vec<String>, flag: &str) -> bool {
@@ -83,8 +93,25 @@ fn take_flag(args: &mut Vec<String>, flag: &str) -> bool {
     args.len() != before
 }
 
-/// Installs the thumb target, `qemu-system-arm` and `defmt-print` where missing.
+/// Installs the thumb target, `qemu-system-arm`, `cc`, `c++` and `defmt-print` where
+/// missing.
 fn setup() -> Result<(), String> {
+    system()?;
+    defmt_print()
+}
+
+/// What [`setup`] installs but `defmt-print` (a build: CPU, not network), and the Python
+/// tests' venv with its packages.
+fn prepare() -> Result<(), String> {
+    let t0 = std::time::Instant::now();
+    system()?;
+    python::prepare()?;
+    say(&format!("prepared in {:.0} s", t0.elapsed().as_secs_f64()));
+    Ok(())
+}
+
+/// The thumb target, `qemu-system-arm`, `cc` and `c++`, each installed where missing.
+fn system() -> Result<(), String> {
     let installed = output("rustup", &["target", "list", "--installed"])
         .map_err(|e| format!("cannot run rustup ({e}): the thumb target must be added by hand"))?;
     if installed.lines().any(|l| l.trim() == THUMB) {
@@ -131,8 +158,11 @@ fn setup() -> Result<(), String> {
         "g++",
         "a C++ compiler",
         "libFuzzer, `cargo xtask fuzz`",
-    )?;
+    )
+}
 
+/// `defmt-print`, built with `cargo install` where missing.
+fn defmt_print() -> Result<(), String> {
     if found("defmt-print") {
         say("defmt-print: installed");
     } else {
@@ -207,6 +237,12 @@ fn test(args: &[String], python: bool) -> Result<(), String> {
                 "fuzz targets built (waited {:.0} s for the background build)",
                 t0.elapsed().as_secs_f64()
             ));
+            if env::var_os("PARAGYRO_FUZZ_DEFER").is_some_and(|v| !v.is_empty() && v != "0") {
+                say(
+                    "fuzz run deferred (PARAGYRO_FUZZ_DEFER): `cargo xtask fuzz` runs the built targets",
+                );
+                return Ok(());
+            }
             fuzz::run_built(&fuzz::TARGETS, secs)
         }
         (Ok(()), None) => Ok(()),

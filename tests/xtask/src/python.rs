@@ -48,16 +48,28 @@ fn target_dir(root: &Path) -> PathBuf {
         .unwrap_or_else(|| root.join("target"))
 }
 
+/// The venv with the pinned packages (steps 1 and 2), nothing built: `cargo xtask prepare`.
+pub fn prepare() -> Result<(), String> {
+    let root = root();
+    venv_with_packages(&root, &target_dir(&root).join("py-venv")).map(|_| ())
+}
+
+/// The venv's interpreter, the venv made and its packages installed where needed.
+fn venv_with_packages(root: &Path, venv: &Path) -> Result<PathBuf, String> {
+    let t = Instant::now();
+    let py = venv_python(venv)?;
+    install_requirements(root, venv, &py)?;
+    took("venv and packages", t);
+    Ok(py)
+}
+
 /// Builds the package into the venv and runs its pytest suite (`pytest_args` passed on);
 /// says how long each step took.
 pub fn test(pytest_args: &[String]) -> Result<(), String> {
     let root = root();
     let target = target_dir(&root);
     let venv = target.join("py-venv");
-    let t = Instant::now();
-    let py = venv_python(&venv)?;
-    install_requirements(&root, &venv, &py)?;
-    took("venv and packages", t);
+    let py = venv_with_packages(&root, &venv)?;
     let bin_dir = venv.join("bin");
     let path = match env::var_os("PATH") {
         Some(p) => {
