@@ -55,6 +55,7 @@ pub use paragyro_core::physics::OMEGA0_TABLE2_RAD_S;
 
 mod forcing;
 pub mod hook;
+pub mod prewarp;
 
 use forcing::Forcing;
 
@@ -906,6 +907,11 @@ impl GyroSim {
     /// Number of RK4 steps `M` per sample.
     pub fn steps_per_sample(&self) -> usize {
         self.m
+    }
+
+    /// The fine RK4 step `h = Ts/M`, τ (the step [`prewarp`] corrects for).
+    pub fn step_tau(&self) -> f64 {
+        self.h
     }
 
     /// Lock-in block length in RK4 steps (the low-pass is advanced once per block; `M`

@@ -159,10 +159,14 @@ impl RecordHeader {
 
 /// The header key of a simulated record's integrator grid: the `omega_max` its RK4 step
 /// count was chosen for (`runner::omega_max`). At 128 steps per period RK4 leaves an
-/// oscillation 4.1e-8 slow, ∝ h⁴: a re-simulation on another grid (the diagnosis chose
-/// `omega_max` from the record's pump with another margin, 2 % apart) differed from the
-/// record by ≈ 8e-9 in ω̂y². Only the simulator writes it; a real device's record has none.
+/// oscillation 4.1e-8 slow, ∝ h⁴: a re-simulation reproduces that grid's dispersion
+/// (`plant::prewarp`), or a 2 % different step would differ from the record by ≈ 8e-9 in
+/// ω̂y². Only the simulator writes it; a real device's record has none.
 pub const SIM_OMEGA_MAX_KEY: &str = "simulator_omega_max";
+
+/// The header key of a simulated record's RK4 steps per carrier period at
+/// [`SIM_OMEGA_MAX_KEY`] (a record without it was written at 128).
+pub const SIM_STEPS_PER_PERIOD_KEY: &str = "simulator_steps_per_period";
 
 /// One 500 Hz sample of a record.
 #[derive(Clone, Copy, Debug, PartialEq)]

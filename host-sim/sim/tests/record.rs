@@ -765,7 +765,13 @@ fn truth_goes_beside_the_csv_never_into_it() {
         let key = l[1..].split(':').next().unwrap().trim();
         assert!(
             record::HEADER_KEYS.contains(&key)
-                || ["generator", "device", record::SIM_OMEGA_MAX_KEY].contains(&key),
+                || [
+                    "generator",
+                    "device",
+                    record::SIM_OMEGA_MAX_KEY,
+                    record::SIM_STEPS_PER_PERIOD_KEY,
+                ]
+                .contains(&key),
             "header line {l}"
         );
     }

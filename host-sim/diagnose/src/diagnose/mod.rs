@@ -299,7 +299,9 @@ pub struct Options {
     pub model: Model,
     /// Re-run the simulator on the record's inputs (output error before/after).
     pub resimulate: bool,
-    /// RK4 steps per carrier period of the re-run.
+    /// RK4 steps per carrier period of the re-run (64 by default), pre-warped
+    /// (`paragyro_simulator::plant::prewarp`) to the exact flow, or to a simulated
+    /// record's own grid (docs/notes.md, "The simulator's own numerics").
     pub steps_per_period: usize,
     /// Whole-record re-simulations beyond the calibration's first
     /// [`CALIBRATION_RESIMULATIONS`] (the bound on the diagnosis's time): the calibration's
@@ -322,7 +324,7 @@ impl Default for Options {
         Options {
             model: Model::table2(),
             resimulate: true,
-            steps_per_period: 128,
+            steps_per_period: 64,
             confirm_runs: None,
             calibration_steps: CALIBRATION_MAX_RESIMULATIONS,
             leave_out_excursions: false,

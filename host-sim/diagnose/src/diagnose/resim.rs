@@ -8,6 +8,7 @@ use paragyro_core::Cplx;
 use paragyro_core::physics::theta_from_physical;
 use paragyro_simulator::effects::{EffectSpec, Effects, T_REF_C};
 use paragyro_simulator::lockin::LockinOut;
+use paragyro_simulator::plant::prewarp::prewarp;
 use paragyro_simulator::plant::{GyroSim, PlantInputs, SimConfig, Theta};
 use paragyro_simulator::record::Record;
 use serde::{Deserialize, Serialize};
@@ -449,7 +450,9 @@ impl Resim<'_> {
         } else {
             [0.01, 0.0, 0.0, 0.0]
         };
+        let h_target = record_step(h, &simcfg)?;
         let mut sim = GyroSim::new(&simcfg, z0).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+        let h_sim = sim.step_tau();
         sim.set_effects(fx, TAU * (f_ref + fx.vib_beat_hz) / omega0);
         if start > 0 {
             sim.restart_at(start as u64, z0, psi[start]);
@@ -482,7 +485,14 @@ impl Resim<'_> {
                 let tc = rec.rows[k].temp_c.unwrap_or(T_REF_C);
                 fx.thermal_theta(&mut d, &mut s, phys.wx2, phys.wy2, tc);
             }
-            sim.advance(&Theta { drive: d, sense: s }, &input(k), &input(k + 1));
+            let (u0, u1) = (input(k), input(k + 1));
+            let th = prewarp(
+                &Theta { drive: d, sense: s },
+                0.5 * (u0.omega + u1.omega),
+                h_sim,
+                h_target,
+            );
+            sim.advance(&th, &u0, &u1);
         }
         Ok(out)
     }
@@ -504,15 +514,46 @@ pub(crate) fn with_lockin(rec: &Record, li: &[LockinOut]) -> Record {
     r
 }
 
-/// The integrator's `omega_max`: a simulated record's own (its header names it: the same
-/// RK4 grid, the same dispersion, which cancels), else the record's largest pump frequency
-/// with a 1 % margin.
+/// The integrator's `omega_max`: a simulated record's own (its header names it), else the
+/// record's largest pump frequency with a 1 % margin.
 fn sim_grid(h: &paragyro_simulator::record::RecordHeader, pump_max: f64) -> f64 {
     let w_pump = pump_max / (2.0 * h.f0_hz);
+    record_omega_max(h)
+        .filter(|w| *w >= w_pump)
+        .unwrap_or((w_pump * 1.01).max(0.5))
+}
+
+/// The `omega_max` a simulated record's integrator ran at (its header's
+/// [`SIM_OMEGA_MAX_KEY`](paragyro_simulator::record::SIM_OMEGA_MAX_KEY)).
+fn record_omega_max(h: &paragyro_simulator::record::RecordHeader) -> Option<f64> {
     h.extra_value(paragyro_simulator::record::SIM_OMEGA_MAX_KEY)
         .and_then(|v| v.parse::<f64>().ok())
-        .filter(|w| w.is_finite() && *w >= w_pump && *w <= 4.0)
-        .unwrap_or((w_pump * 1.01).max(0.5))
+        .filter(|w| w.is_finite() && *w > 0.0 && *w <= 4.0)
+}
+
+/// The RK4 step (τ) whose dispersion the re-simulation reproduces ([`prewarp`]): a
+/// simulated record's own (its header names its grid; the same dispersion then cancels),
+/// else 0, the exact flow that a device follows.
+fn record_step(
+    h: &paragyro_simulator::record::RecordHeader,
+    sim: &SimConfig,
+) -> anyhow::Result<f64> {
+    let Some(omega_max) = record_omega_max(h) else {
+        return Ok(0.0);
+    };
+    let steps_per_period = h
+        .extra_value(paragyro_simulator::record::SIM_STEPS_PER_PERIOD_KEY)
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|s| (16..=4096).contains(s))
+        .unwrap_or(128);
+    let cfg = SimConfig {
+        omega_max,
+        steps_per_period,
+        lpf_hz: h.lockin_lpf_hz,
+        ..sim.clone()
+    };
+    let rec_sim = GyroSim::new(&cfg, [0.0; 4]).map_err(|e| anyhow::anyhow!("simulator: {e}"))?;
+    Ok(rec_sim.step_tau())
 }
 
 #[cfg(test)]

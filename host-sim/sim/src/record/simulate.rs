@@ -136,6 +136,10 @@ pub fn simulate_record_ext(
             super::SIM_OMEGA_MAX_KEY.into(),
             format!("{}", runner::omega_max(sc, &cfg)),
         ),
+        (
+            super::SIM_STEPS_PER_PERIOD_KEY.into(),
+            format!("{}", sc.sim.steps_per_period),
+        ),
     ];
     let t_end = rows.last().map_or(0.0, |r| r.t_s);
     let closed_loop = TruthClosedLoop {
