@@ -123,3 +123,37 @@ fn the_prediction_spread_peaks_where_the_drive_grows_back_from_a_deep_collapse()
         ps.spread[worst][0]
     );
 }
+
+/// A clean device whose calibrated model departs from its record only at the drive's
+/// regrowths reads `none`: run 22's record 0084 (refsim seed 2323, development since that
+/// run: `paragyro-refsim gen --n 100 --seed 2323 --only 0084`), whose drive collapses and
+/// grows back again and again after its pump-amplitude step. With the regrowths the
+/// held-out residual is 3.8× its noise; outside their windows (29 % of the held-out span)
+/// it is at the noise, and the report says so (limitation
+/// `regrowth`; host-sim/diagnose/docs/notes.md, "The model's prediction spread at the
+/// drive's regrowths").
+#[test]
+fn a_clean_device_departing_only_at_its_regrowths_reads_none() {
+    use paragyro_diagnose::diagnose::NONE_NOISE_MAX;
+    let d = draw(100, 2323, 20.0, 0.4).remove(84);
+    assert_eq!(d.category, Category::None);
+    let sim = d.simulate(4, 150.0, 1e-9).unwrap();
+    let text = to_text(&d.header(4, 150.0), &sim.rows);
+    let rec = paragyro_simulator::record::parse_record(&text, "refsim 0084").unwrap();
+    let r = diagnose(&rec, &Options::default()).unwrap().report;
+    let judged = r
+        .limitations
+        .iter()
+        .find(|l| l.detail.contains("judged outside the drive's regrowths"));
+    println!(
+        "{} at {:.3} × its noise; {:?}",
+        r.verdict, r.residual_over_noise, judged
+    );
+    assert!(
+        r.residual_over_noise > NONE_NOISE_MAX,
+        "{:.3}: not the record this test is for",
+        r.residual_over_noise
+    );
+    assert_eq!(r.verdict.to_string(), "none", "{:?}", r.limitations);
+    assert!(judged.is_some(), "{:?}", r.limitations);
+}

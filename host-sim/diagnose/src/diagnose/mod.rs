@@ -523,7 +523,7 @@ pub(crate) fn calibration(
     }
     if let Some(why) = rows.regrowth_note() {
         limits.push(report::Limitation::new("regrowth", why));
-    } else if let Some((share, time)) = drive_departure_at_regrowths(rec, &rows, &spans) {
+    } else if let Some((share, time, _)) = drive_departure_at_regrowths(rec, &rows, &spans) {
         limits.push(report::Limitation::new(
             "regrowth",
             rows::regrowth_departure_note(share, time),
@@ -544,7 +544,7 @@ fn drive_departure_at_regrowths(
     rec: &Record,
     rows: &rows::Rows,
     spans: &rows::Spans,
-) -> Option<(f64, f64)> {
+) -> Option<(f64, f64, Vec<bool>)> {
     let sim = rows.before_sim.as_ref()?;
     let l0 = rec.header.l0_um;
     let r: Vec<(f64, f64)> = rec
@@ -557,6 +557,58 @@ fn drive_departure_at_regrowths(
         .map(|o| (o.x_um[0].re * l0, o.x_um[0].im * l0))
         .collect();
     rows::regrowth_departure(&r, &m, spans.hold.clone(), rows.fs)
+}
+
+/// A record whose calibrated model leaves it `unknown` after the confirmation, with the
+/// drive's held-out departure at its regrowths ([`drive_departure_at_regrowths`]), judged
+/// again on the samples outside the regrowths' windows: `none` when there it is at its
+/// noise ([`verdict::decide`]'s own rule, [`NONE_NOISE_MAX`] and [`GAP_MIN`], on the rows'
+/// fits without those samples), with a `regrowth` limitation that says so; the decision
+/// unchanged otherwise. After a deep collapse the calibrated model's own prediction spread
+/// is hundreds of times its spread elsewhere (docs/notes.md, "The model's prediction spread
+/// at the drive's regrowths"), so a departure only there is no effect's gap. Without
+/// another run of the record.
+fn none_outside_regrowths(
+    st: &Stage,
+    ranking: &[report::Candidate],
+    face: &calibrate::ParameterFace,
+    row_noise: &[f64; NR],
+    decision: verdict::Decision,
+    limits: &mut Vec<report::Limitation>,
+) -> verdict::Decision {
+    if decision.verdict != verdict::Verdict::Unknown || st.rows.regrowth_note().is_some() {
+        return decision;
+    }
+    let Some((_, time, near)) = drive_departure_at_regrowths(st.rec, st.rows, st.spans) else {
+        return decision;
+    };
+    let usable: Vec<bool> = st
+        .rows
+        .usable
+        .iter()
+        .enumerate()
+        .map(|(k, &u)| u && !near.get(k).copied().unwrap_or(false))
+        .collect();
+    let fits = rank::Fits::build_on(st.cols, st.rows, st.spans, &usable);
+    let outside = verdict::decide(st.cols, st.rows, st.spans, &fits, ranking, face, row_noise);
+    if outside.verdict != verdict::Verdict::None {
+        return decision;
+    }
+    limits.push(report::Limitation::new(
+        "regrowth",
+        format!(
+            "`none` judged outside the drive's regrowths ({:.0} % of the held-out span left out): there the held-out residual is {:.3} × the record's noise and no model closes {:.1} % of it ({:.3} × with them)",
+            100.0 * time,
+            outside.residual_over_noise,
+            100.0 * outside.gap_fraction,
+            decision.residual_over_noise
+        ),
+    ));
+    verdict::Decision {
+        verdict: verdict::Verdict::None,
+        closest: Answer::None,
+        ..decision
+    }
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
@@ -771,6 +823,16 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
         &mut timing,
         &mut limits,
     );
+    let st = Stage {
+        rec,
+        opts,
+        rows: &rows,
+        spans: &spans,
+        cols: &cols,
+        fits: &fits,
+    };
+    // 4c. `unknown` only at the drive's regrowths: judged outside them
+    let decision = none_outside_regrowths(&st, &ranking, &face, &row_noise, decision, &mut limits);
     // the parameter face with the verdict's effect(s) fitted jointly (an unmodelled force
     // otherwise leaks into the θ)
     let (face, joint_model) = if decision.verdict_cols.is_empty() {
@@ -804,14 +866,6 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
                 (face, opts.model.clone())
             }
         }
-    };
-    let st = Stage {
-        rec,
-        opts,
-        rows: &rows,
-        spans: &spans,
-        cols: &cols,
-        fits: &fits,
     };
     // 5. where the gap lies
     let place = locate::locate(&st, &decision);

@@ -33,11 +33,16 @@ pub(crate) struct Fits {
 
 impl Fits {
     pub(crate) fn build(cols: &Columns, rows: &Rows, spans: &Spans) -> Self {
+        Self::build_on(cols, rows, spans, &rows.usable)
+    }
+
+    /// [`Fits::build`] on the samples `usable` marks (the rows' own, or fewer).
+    pub(crate) fn build_on(cols: &Columns, rows: &Rows, spans: &Spans, usable: &[bool]) -> Self {
         let refs: Vec<&[[f64; NR]]> = cols.cols.iter().map(|c| c.v.as_slice()).collect();
         let bank = Bank::build(
             &refs,
             &rows.y,
-            &rows.usable,
+            usable,
             &spans.fit_blocks,
             spans.hold.clone(),
         );

@@ -310,37 +310,49 @@ pub const REGROWTH_DEPARTURE_SHARE: f64 = 0.5;
 /// … at an energy per sample at least this many times the rest of the held-out span's.
 pub const REGROWTH_DENSITY: f64 = 10.0;
 
-/// Where the drive's departure from the re-simulation sits at its regrowths: the share of
-/// the held-out (`hold`) energy of |x1 record − x1 re-simulation| in the regrowths' windows
-/// ([`REGROWTH_BEFORE_S`] before to [`REGROWTH_AFTER_S`] after each collapse's end), and the
-/// share of the span those windows take, when the first is at least
-/// [`REGROWTH_DEPARTURE_SHARE`] and the windows' energy per sample is at least
-/// [`REGROWTH_DENSITY`] times the rest's; `None` otherwise (or when the windows take the
-/// whole span). After a deep collapse the trajectory amplifies the parameters' last digits
-/// hundreds of times, so a departure there can be the calibrated model's own prediction
-/// spread (docs/notes.md, "The model's prediction spread at the drive's regrowths"), not an
-/// effect's gap.
-pub(crate) fn regrowth_departure(
+/// The samples in a regrowth's window ([`REGROWTH_BEFORE_S`] before to
+/// [`REGROWTH_AFTER_S`] after the end of each collapse of the record's or the
+/// re-simulation's drive, [`collapses`]); `None` without a working amplitude. A collapse
+/// that lasts to the record's end has no regrowth.
+pub(crate) fn regrowth_windows(
     rec: &[(f64, f64)],
     sim: &[(f64, f64)],
-    hold: Range<usize>,
     fs: f64,
-) -> Option<(f64, f64)> {
+) -> Option<Vec<bool>> {
     let n = rec.len().min(sim.len());
-    let hold = hold.start.min(n)..hold.end.min(n);
-    if hold.is_empty() {
-        return None;
-    }
     let (_, collapses) = collapses(rec, sim)?;
     let (before, after) = (
         (REGROWTH_BEFORE_S * fs).round() as usize,
         (REGROWTH_AFTER_S * fs).round() as usize,
     );
     let mut near = vec![false; n];
-    // a collapse that lasts to the record's end has no regrowth
     for (_, end) in collapses.into_iter().filter(|&(_, end)| end < n) {
         near[end.saturating_sub(before)..(end + after).min(n)].fill(true);
     }
+    Some(near)
+}
+
+/// Where the drive's departure from the re-simulation sits at its regrowths: the share of
+/// the held-out (`hold`) energy of |x1 record − x1 re-simulation| in the regrowths' windows
+/// ([`regrowth_windows`]), the share of the span those windows take, and the windows, when
+/// the first is at least [`REGROWTH_DEPARTURE_SHARE`] and the windows' energy per sample is
+/// at least [`REGROWTH_DENSITY`] times the rest's; `None` otherwise (or when the windows
+/// take the whole span). After a deep collapse the trajectory amplifies the parameters'
+/// last digits hundreds of times, so a departure there can be the calibrated model's own
+/// prediction spread (docs/notes.md, "The model's prediction spread at the drive's
+/// regrowths"), not an effect's gap.
+pub(crate) fn regrowth_departure(
+    rec: &[(f64, f64)],
+    sim: &[(f64, f64)],
+    hold: Range<usize>,
+    fs: f64,
+) -> Option<(f64, f64, Vec<bool>)> {
+    let n = rec.len().min(sim.len());
+    let hold = hold.start.min(n)..hold.end.min(n);
+    if hold.is_empty() {
+        return None;
+    }
+    let near = regrowth_windows(rec, sim, fs)?;
     let (mut e_in, mut e_out, mut k_in, mut k_out) = (0.0, 0.0, 0usize, 0usize);
     for k in hold.clone() {
         let e = (rec[k].0 - sim[k].0).powi(2) + (rec[k].1 - sim[k].1).powi(2);
@@ -360,8 +372,11 @@ pub(crate) fn regrowth_departure(
     }
     let share = e_in / (e_in + e_out);
     let dense = e_in / k_in as f64 >= REGROWTH_DENSITY * e_out / k_out as f64;
-    (share >= REGROWTH_DEPARTURE_SHARE && dense)
-        .then_some((share, k_in as f64 / (k_in + k_out) as f64))
+    (share >= REGROWTH_DEPARTURE_SHARE && dense).then_some((
+        share,
+        k_in as f64 / (k_in + k_out) as f64,
+        near,
+    ))
 }
 
 /// [`regrowth_departure`] said in a report's limitation.
@@ -862,7 +877,7 @@ mod tests {
         let sim = drive(5000, &[(2000, 2010), (3500, 3510)], None);
         let rec = departing(&sim, 3510..3530, 0.1);
         assert!(unreproduced_regrowths(&rec, &sim).iter().all(|&k| k));
-        let (share, time) = regrowth_departure(&rec, &sim, 1500..5000, 500.0).unwrap();
+        let (share, time, _) = regrowth_departure(&rec, &sim, 1500..5000, 500.0).unwrap();
         assert!(share > 0.9, "share {share}");
         // two windows of 0.3 s in the 7 s span
         assert!((time - 300.0 / 3500.0).abs() < 0.01, "time {time}");
