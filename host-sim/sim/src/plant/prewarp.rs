@@ -83,7 +83,7 @@ fn target_factor(omega: f64, h: f64, h_target: f64) -> C {
 }
 
 /// The time scale `1 + ε` and the amplitude rate `r` (per τ) that make RK4 at step `h`
-/// advance an oscillation at ω as the target does ([`target_factor`]).
+/// advance an oscillation at ω as the target does (the exact flow, or RK4 at `h_target`).
 pub fn prewarp_factors(omega: f64, h: f64, h_target: f64) -> (f64, f64) {
     let t = target_factor(omega, h, h_target);
     let mut z = (0.0, omega * h);
