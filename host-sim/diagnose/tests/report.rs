@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use paragyro_diagnose::diagnose::calibrate::{FaceHypothesis, ParamDeviation, ParameterFace};
-use paragyro_diagnose::diagnose::confirm::{Pair, Run, Stop};
+use paragyro_diagnose::diagnose::confirm::{Pair, Run, Stop, WithoutRegrowths};
 use paragyro_diagnose::diagnose::locate::{AxisShare, Regime, RowEnergy, Tercile, TimeSpan, Where};
 use paragyro_diagnose::diagnose::report::{BeatScan, Confirmation, FORMAT, Limitation};
 use paragyro_diagnose::diagnose::{
@@ -157,6 +157,12 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                 residual_over_noise,
             },
         )),
+        prop::option::of(
+            (num(), num()).prop_map(|(share, residual_over_noise_with)| WithoutRegrowths {
+                share,
+                residual_over_noise_with,
+            }),
+        ),
     )
         .prop_map(
             |(
@@ -170,6 +176,7 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                 stopped,
                 next_step,
                 with,
+                outside_regrowths,
             )| {
                 Confirmation {
                     effect,
@@ -190,6 +197,7 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                     stopped,
                     next_step,
                     with,
+                    outside_regrowths,
                 }
             },
         )

@@ -1,7 +1,7 @@
 //! Stage 4b, a large effect confirmed by re-simulation. The structural columns are linear
 //! about the calibrated model, and the calibration has absorbed part of a large effect:
 //! then a library effect, significant and closing most of what can be closed, can still
-//! leave more than [`UNEXPLAINED_MAX`] of the gap above the noise, and the verdict would be
+//! leave more than [`UNEXPLAINED_MAX`](super::UNEXPLAINED_MAX) of the gap above the noise, and the verdict would be
 //! `unknown` (e.g. a force leak at 72× its detection limit, its size fitted within 0.2 %).
 //! Here the simulator is re-run with such a candidate at its fitted size (`confirm` says
 //! which, at most [`CONFIRM_MAX`]), on the model recalibrated jointly with it, refined by
@@ -10,12 +10,12 @@
 //! [`Options::confirm_runs`] whole-record runs is spent, the 14 θ refitted on the gap the
 //! last run leaves, the record's noise re-estimated against it, and
 //! the same two rules applied to what is left on the held-out span: at most
-//! [`UNEXPLAINED_MAX`] of the gap above the noise in total (or the record brought to its
+//! [`UNEXPLAINED_MAX`](super::UNEXPLAINED_MAX) of the gap above the noise in total (or the record brought to its
 //! noise, at most [`NONE_NOISE_MAX`] × it: `none`'s own level; 5 % of a gap near the
 //! noise is below what the noise estimate resolves), and no row holding a share of the gap
-//! left more than [`ROW_UNEXPLAINED_MAX`] unexplained, each row against its own noise
+//! left more than [`ROW_UNEXPLAINED_MAX`](super::ROW_UNEXPLAINED_MAX) unexplained, each row against its own noise
 //! level ([`super::NOISE_ROW_PROFILE`]) and only where what is left above it also exceeds
-//! [`ROW_SCATTER_SIGMAS`] × the row's scatter at the noise ([`super::NOISE_ROW_SCATTER`]):
+//! [`ROW_SCATTER_SIGMAS`](super::ROW_SCATTER_SIGMAS) × the row's scatter at the noise ([`super::NOISE_ROW_SCATTER`]):
 //! a row at its noise moves by that much from one record to the next. Only then is the
 //! effect the verdict; otherwise `unknown` stands.
 //!
@@ -38,23 +38,22 @@
 
 use serde::{Deserialize, Serialize};
 
+mod rules;
+pub use rules::passes;
+use rules::{Judged, both_usable, judge, refit, rules};
+
 use paragyro_simulator::record::Record;
 
 use super::calibrate::{self, ThetaFit};
-use super::columns::{Column, Columns};
+use super::columns::Columns;
 use super::howfar::Specs;
-use super::lsq::{Bank, Fit, row_energy};
+use super::lsq::Fit;
 use super::rank::Fits;
 use super::report::Candidate;
 use super::report::Limitation;
-use super::resim;
 use super::rows::{Rows, Spans};
 use super::verdict::{Answer, Decision, Secondary, Verdict};
-use super::{
-    CONFIRM_NOISE_MAX, NOISE_ROW_ENERGY, NOISE_ROW_PROFILE, NOISE_ROW_SCATTER, NONE_NOISE_MAX, NR,
-    Options, ROW_GAP_MIN, ROW_GAP_SHARE, ROW_SCATTER_SIGMAS, ROW_UNEXPLAINED_MAX, SHARE_MIN, T_SIG,
-    Timing, UNEXPLAINED_MAX,
-};
+use super::{NONE_NOISE_MAX, Options, SHARE_MIN, T_SIG, Timing};
 use paragyro_simulator::effects::{Effect, EffectSpec, Signature};
 
 /// The re-simulation test of one candidate (an entry of report.json's `confirmation`).
@@ -90,6 +89,19 @@ pub struct Confirmation {
     /// fields above judge the candidate alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub with: Option<Pair>,
+    /// Set when the last run passed only on the held-out samples outside the drive's
+    /// regrowths (module docs); the fields above are then the rules' reading outside them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outside_regrowths: Option<WithoutRegrowths>,
+}
+
+/// A run judged outside the drive's regrowths ([`Confirmation::outside_regrowths`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WithoutRegrowths {
+    /// The share of the held-out span the regrowths' windows took (left out).
+    pub share: f64,
+    /// The held-out residual per row × the record's noise with them.
+    pub residual_over_noise_with: f64,
 }
 
 /// The second effect of a pair that passed the two rules ([`Confirmation::with`]).
@@ -410,145 +422,6 @@ fn picks_up_to(inp: &Inputs<'_>, ranking: &[Candidate], max: usize) -> Vec<(Effe
     picks
 }
 
-/// Samples usable in both the calibrated model's rows and the effect's run.
-fn both_usable(rows: &Rows, rows_e: &Rows) -> Vec<bool> {
-    rows.usable
-        .iter()
-        .zip(&rows_e.usable)
-        .map(|(a, b)| *a && *b)
-        .collect()
-}
-
-/// The 14 θ columns of `rows_e` and `extra` fitted on its gap over the fit span: the fit
-/// and the held-out energy per row it leaves.
-fn refit(rows_e: &Rows, usable: &[bool], spans: &Spans, extra: &[Column]) -> (Fit, [f64; NR]) {
-    let th = rows_e.theta_columns();
-    let refs: Vec<&[[f64; NR]]> = th
-        .iter()
-        .map(|c| c.as_slice())
-        .chain(extra.iter().map(|c| c.v.as_slice()))
-        .collect();
-    let bank = Bank::build(
-        &refs,
-        &rows_e.y,
-        usable,
-        &spans.fit_blocks,
-        spans.hold.clone(),
-    );
-    let f = bank.fit(&(0..refs.len()).collect::<Vec<_>>());
-    let e = row_energy(&f, &rows_e.y, &refs, usable, spans.hold.clone());
-    (f, e)
-}
-
-/// What the confirmation's two rules read of one run with the effect (module docs).
-struct Judged {
-    unexplained: f64,
-    unexplained_rows: Vec<usize>,
-    residual_over_noise: f64,
-    nu2_e: f64,
-    confirmed: bool,
-}
-
-/// The two rules on the gap the effect's run `rows_e` leaves (module docs).
-fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
-    let Inputs {
-        rec,
-        rows,
-        spans,
-        nu2,
-        e1,
-        ..
-    } = *inp;
-    // the 14 θ refitted on the gap the effect's run leaves, same spans
-    let (_, e_c) = refit(rows_e, &both_usable(rows, rows_e), spans, &[]);
-    // the record's noise re-estimated against the run with the effect: the calibrated
-    // model's error moves fast where a large effect is missing from it, which inflates ν²
-    // (a force leak at 7e-4: 9.5 for a noise near 1) and would make this test lenient
-    let nu2_e = match &rows_e.before_sim {
-        Some(sim) => resim::noise_energy_ratio(
-            rec,
-            sim,
-            spans.first..spans.last + 1,
-            &rows_e.reproduced,
-            e1,
-        )?
-        .min(nu2),
-        None => nu2,
-    };
-    Ok(rules(inp, &e_c, nu2_e))
-}
-
-/// The two rules on the held-out energy per row `e_c` a run leaves, against the record's
-/// noise energy ratio `nu2_e` (module docs).
-fn rules(inp: &Inputs<'_>, e_c: &[f64; NR], nu2_e: f64) -> Judged {
-    let Inputs {
-        rows,
-        spans,
-        cols,
-        fits,
-        ..
-    } = *inp;
-    let refs: Vec<&[[f64; NR]]> = cols.cols.iter().map(|c| c.v.as_slice()).collect();
-    let e_b = row_energy(
-        &fits.base_fit,
-        &rows.y,
-        &refs,
-        &rows.usable,
-        spans.hold.clone(),
-    );
-    // each row's noise level from the development devices' average profile, against which
-    // the rows' scatter (`NOISE_ROW_SCATTER`) was measured (not the record's own, which
-    // the `none` gate uses: the per-row rule's scatter is about this profile)
-    let noise = NOISE_ROW_ENERGY * nu2_e;
-    let noise_of = |i: usize| noise * NOISE_ROW_PROFILE[i];
-    let above = |e: &[f64; NR]| (0..NR).map(|i| e[i] - noise_of(i)).sum::<f64>();
-    let (gap_b, gap_c) = (above(&e_b), above(e_c));
-    let unexplained = if gap_b > 0.0 {
-        (gap_c / gap_b).max(0.0)
-    } else {
-        0.0
-    };
-    let g0: Vec<f64> = (0..NR).map(|i| e_b[i] - noise_of(i)).collect();
-    let tot: f64 = g0.iter().map(|v| v.max(0.0)).sum();
-    // a row left mostly unexplained, by more than its own scatter at the noise (a row at
-    // its noise moves by that much from one record to the next: not a gap left)
-    let unexplained_rows: Vec<usize> = (0..NR)
-        .filter(|&i| {
-            let left = e_c[i] - noise_of(i);
-            g0[i] > ROW_GAP_SHARE * tot
-                && g0[i] > ROW_GAP_MIN
-                && left > ROW_UNEXPLAINED_MAX * g0[i]
-                && left > ROW_SCATTER_SIGMAS * NOISE_ROW_SCATTER[i] * nu2_e
-        })
-        .collect();
-    let residual_over_noise = e_c.iter().sum::<f64>() / NR as f64 / noise;
-    let confirmed = passes(gap_b, unexplained, residual_over_noise, &unexplained_rows);
-    Judged {
-        unexplained,
-        unexplained_rows,
-        residual_over_noise,
-        nu2_e,
-        confirmed,
-    }
-}
-
-/// The rules on what a run leaves: a gap to explain (`gap_b` above the noise); at most
-/// [`UNEXPLAINED_MAX`] of it left, or the record brought to its noise (the `none` gate's
-/// level, [`NONE_NOISE_MAX`]: a gap near the noise leaves 5 % of itself below what the
-/// noise estimate resolves, 2–7 %); the residual at most [`CONFIRM_NOISE_MAX`] × the
-/// noise whatever share of the gap that is; and no row left mostly unexplained.
-pub fn passes(
-    gap_b: f64,
-    unexplained: f64,
-    residual_over_noise: f64,
-    unexplained_rows: &[usize],
-) -> bool {
-    gap_b > 0.0
-        && (unexplained <= UNEXPLAINED_MAX || residual_over_noise <= NONE_NOISE_MAX)
-        && residual_over_noise <= CONFIRM_NOISE_MAX
-        && unexplained_rows.is_empty()
-}
-
 /// A run leaving more than this share of the held-out gap above the noise unexplained left
 /// more of it than the calibrated model without the effect ([`hopeless`]).
 pub const HOPELESS_UNEXPLAINED: f64 = 1.0;
@@ -782,28 +655,23 @@ fn test_one(
         partner(inp, effect, ranking, &opts_e, &rows_e, &j, limits)
     };
     timing.tick("confirm_pair");
-    let (with, second) = match paired {
-        Some(p) => (
-            Some(Pair {
-                effect: p.spec.to_string(),
-                unexplained: p.judged.unexplained,
-                residual_over_noise: p.judged.residual_over_noise,
-            }),
-            Some(Second {
-                effect: p.effect,
-                added: j.unexplained - p.judged.unexplained,
-                unexplained: p.judged.unexplained,
-            }),
-        ),
-        None => (None, None),
-    };
+    let (with, second) = pair_of(paired, j.unexplained);
     let Judged {
         unexplained,
         unexplained_rows,
         residual_over_noise,
         nu2_e,
         confirmed,
+        outside_regrowths,
     } = j;
+    if confirmed && let Some(o) = outside_regrowths {
+        limits.push(judged_without_regrowths(
+            &specs[0],
+            o,
+            residual_over_noise,
+            unexplained,
+        ));
+    }
     Ok(Tested {
         conf: Confirmation {
             effect: specs[0].to_string(),
@@ -816,10 +684,51 @@ fn test_one(
             stopped: Some(stopped),
             next_step,
             with,
+            outside_regrowths,
         },
         fit_e,
         second,
     })
+}
+
+/// The `regrowth` limitation of a candidate confirmed outside the drive's regrowths: its
+/// run's residual and share of the gap left there (`residual_over_noise`, `unexplained`)
+/// and the residual with them.
+fn judged_without_regrowths(
+    spec: &EffectSpec,
+    o: WithoutRegrowths,
+    residual_over_noise: f64,
+    unexplained: f64,
+) -> Limitation {
+    Limitation::new(
+        "regrowth",
+        format!(
+            "`{spec}` confirmed outside the drive's regrowths ({:.0} % of the held-out span left out): there its run leaves {residual_over_noise:.3} × the record's noise and {:.1} % of the gap above it ({:.3} × with them)",
+            100.0 * o.share,
+            100.0 * unexplained,
+            o.residual_over_noise_with
+        ),
+    )
+}
+
+/// A pair that passed ([`partner`]) as the confirmation's [`Pair`] and the [`Second`] the
+/// verdict takes; `alone` the share of the gap the candidate's run left alone.
+fn pair_of(paired: Option<Paired>, alone: f64) -> (Option<Pair>, Option<Second>) {
+    match paired {
+        Some(p) => (
+            Some(Pair {
+                effect: p.spec.to_string(),
+                unexplained: p.judged.unexplained,
+                residual_over_noise: p.judged.residual_over_noise,
+            }),
+            Some(Second {
+                effect: p.effect,
+                added: alone - p.judged.unexplained,
+                unexplained: p.judged.unexplained,
+            }),
+        ),
+        None => (None, None),
+    }
 }
 
 /// A candidate's test ([`test_one`]).
@@ -929,10 +838,8 @@ fn partner(
 
 #[cfg(test)]
 mod tests {
-    use super::{
-        CONFIRM_NOISE_MAX, NONE_NOISE_MAX, UNEXPLAINED_MAX, converged, hopeless, passes,
-        vibration_step,
-    };
+    use super::{converged, hopeless, passes, vibration_step};
+    use crate::diagnose::{CONFIRM_NOISE_MAX, NONE_NOISE_MAX, UNEXPLAINED_MAX};
 
     /// The vibration's step moves its complex amplitude: a change along the amplitude
     /// changes the size, one across it turns the phase; `along` is the size's change

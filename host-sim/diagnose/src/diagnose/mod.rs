@@ -537,10 +537,10 @@ pub(crate) fn calibration(
     Ok((rows, spans, opts_cal, fit, steps))
 }
 
-/// [`rows::regrowth_departure`] of the record's drive against the calibrated model's
-/// re-simulation (in L0, taken to µm) over the held-out span (`None` without the
-/// re-simulation).
-fn drive_departure_at_regrowths(
+/// [`rows::regrowth_departure`] of the record's drive against the re-simulation `rows`
+/// carries (the calibrated model's, or a confirmation's run; in L0, taken to µm) over the
+/// held-out span (`None` without the re-simulation).
+pub(crate) fn drive_departure_at_regrowths(
     rec: &Record,
     rows: &rows::Rows,
     spans: &rows::Spans,
