@@ -35,16 +35,16 @@
 //!   narrow channel's quadrature leaves its gate during a fast warm-up and the rate is
 //!   flagged invalid).
 //!
-//! A jump (a mode hop, a shock: ω_y² +0.3 % within 10 ms) moves the column by 3e-3 at once:
-//! its innovations cross the detector's threshold on the first samples, and it is reset and
-//! re-identified as before. A measured drift faster than `rls.drift_max_ppm_s` is a jump too
-//! (no walk, no lead: a fast ramp such as `drift-retune`'s 0.34 % in 0.5 s is left to the
-//! detector). A reset clears the measured drift but keeps the wander learned before it (the
-//! device's and its dither's, not the drift's): the drift is measured again from a settled
-//! estimate two windows after the reset (a re-identification's corrections are not a
-//! drift), and a drift that went on through the reset stands out of the kept wander within
-//! a window. Relearned after each reset from a drifting device, the wander would take the
-//! drift for itself, and each reset would bring the next.
+//! A jump (a mode hop, a shock: ω_y² +0.3 % within 10 ms) moves the column by 3e-3 at once: its
+//! innovations cross the detector's threshold on the first samples, and the slow RLS is reset
+//! and re-identifies from the design's start-up. A measured drift faster than
+//! `rls.drift_max_ppm_s` is a jump too (no walk, no lead: a fast ramp such as `drift-retune`'s
+//! 0.34 % in 0.5 s is left to the detector). A reset clears the measured drift but keeps the
+//! wander learned before it (the device's and its dither's, not the drift's): the drift is
+//! measured again from a settled estimate two windows after the reset (a re-identification's
+//! corrections are not a drift), and a drift that went on through the reset stands out of the
+//! kept wander within a window. Relearned after each reset from a drifting device, the wander
+//! would take the drift for itself, and each reset would bring the next.
 //!
 //! * **The drive from the sense.** The drive's rows resolve θ12 several times less well
 //!   than the sense's θ22, and the dither wanders its corrections more: a warm-up's

@@ -48,7 +48,7 @@ pub const WARM_GATE_S: f64 = 0.25;
 /// gate. So `WARM_SETTLE_NEW` fresh ω̂y² values (one every 25 samples, 0.05 s) that agree
 /// with the restored one and with each other declare it settled; values that disagree (the
 /// device changed while off) flush the restored ones as from a cold start. Later settles
-/// (after a reset) use the design's window as before.
+/// (after a reset) use the design's window.
 pub const WARM_SETTLE_NEW: usize = 2;
 /// A stored pump centre further than this (relative) from the configured one is
 /// implausible.

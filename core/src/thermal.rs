@@ -2,8 +2,8 @@
 //! drift predicted from it.
 //!
 //! When the samples carry a die temperature ([`crate::Sample::temp_c`]), the natural
-//! frequencies' drift is no longer only something the rows reveal after the fact
-//! (module [`crate::drift`]): it is the learned coefficient times the temperature's rate.
+//! frequencies' drift is not only something the rows reveal after the fact (module
+//! [`crate::drift`]): it is the learned coefficient times the temperature's rate.
 //! Per block of [`ThermalDesign::every`] samples (0.1 s):
 //!
 //! * **The temperature and its rate.** The block's mean temperature goes through Brown's double

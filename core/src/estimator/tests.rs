@@ -196,7 +196,7 @@ fn pump_commands_out_of_range_are_refused() {
     let mut est = Config::table2().build::<f32>().unwrap();
     let centre = est.pump_centre_hz();
     // the fuzzed sequence of regression nan-pump-1, reduced: an absurd centre, then a
-    // dither "below 5 % of it"; both used to be accepted and the pump became NaN
+    // dither "below 5 % of it"; both must be refused, or the pump becomes NaN
     for bad in [
         1.3e181,
         -1.0,

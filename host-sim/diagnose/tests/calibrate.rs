@@ -311,7 +311,7 @@ fn a_device_whose_rows_carry_more_noise_reads_none() {
 
 /// A large thermal drift (−45 ppm/K over a 4 K rise, 45× its detection limit) on a
 /// toleranced device: the record's estimator carries the drifting θ22's own row term
-/// (core `rows`, "A drifting coefficient"), so the calibration's θ no longer absorb part of
+/// (core `rows`, "A drifting coefficient"), so the calibration's θ do not absorb part of
 /// the drift, and the linear test names it at its size (−45.06 ppm/K, 99.96 % of the gap
 /// closed) without a re-simulation, with the default budget and with three runs alike.
 #[test]

@@ -136,7 +136,7 @@ fn angular_vibration_beat_is_found() {
 /// A pick-off gain error rescales the sense rows: to the calibration it is a set of θ
 /// deviations (αy −0.6 %, and (θ14 − θ24)/4 off the rate table, which reads as
 /// anisodamping). It is not `none`; it is not an honest test of `unknown` either (issue 11:
-/// a rescaling of θ), which is why the blind benchmark no longer draws it.
+/// a rescaling of θ), which is why the blind benchmark does not draw it.
 #[test]
 fn readout_gain_is_a_departure_of_the_parameters() {
     let (v, j) = diagnosed(&["readout_gain=3e-3"], 18);
