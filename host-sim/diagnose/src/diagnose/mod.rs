@@ -561,14 +561,15 @@ pub(crate) fn drive_departure_at_regrowths(
 
 /// A record whose calibrated model leaves it `unknown` after the confirmation, with the
 /// drive's held-out departure at its regrowths ([`drive_departure_at_regrowths`]), judged
-/// again on the samples outside the regrowths' windows: `none` when there it is at its
-/// noise ([`verdict::decide`]'s own rule, [`NONE_NOISE_MAX`] and [`GAP_MIN`], on the rows'
-/// fits without those samples), with a `regrowth` limitation that says so; the decision
-/// unchanged otherwise. After a deep collapse the calibrated model's own prediction spread
+/// again on the samples outside the regrowths' windows: when there it is at its noise
+/// ([`verdict::decide`]'s own rule, [`NONE_NOISE_MAX`] and [`GAP_MIN`], on the rows' fits
+/// without those samples), `none`, or the effect the parameter face names (anisodamping
+/// against a rate table: `decide` names it at the noise), with a `regrowth` limitation
+/// that says so; the decision unchanged otherwise. After a deep collapse the calibrated model's own prediction spread
 /// is hundreds of times its spread elsewhere (docs/notes.md, "The model's prediction spread
 /// at the drive's regrowths"), so a departure only there is no effect's gap. Without
 /// another run of the record.
-fn none_outside_regrowths(
+fn at_noise_outside_regrowths(
     st: &Stage,
     ranking: &[report::Candidate],
     face: &calibrate::ParameterFace,
@@ -591,24 +592,52 @@ fn none_outside_regrowths(
         .collect();
     let fits = rank::Fits::build_on(st.cols, st.rows, st.spans, &usable);
     let outside = verdict::decide(st.cols, st.rows, st.spans, &fits, ranking, face, row_noise);
-    if outside.verdict != verdict::Verdict::None {
-        return decision;
-    }
+    // at the noise there: `none`, or the effect the parameter face names (anisodamping
+    // against a rate table), which has no columns of its own for the rows to fit
+    let name = match &outside.verdict {
+        verdict::Verdict::None => "`none`".to_string(),
+        verdict::Verdict::Effects {
+            primary,
+            secondary: None,
+        } if outside.verdict_cols.is_empty() && face_names(face, *primary) => {
+            format!("`{primary}`, the parameter face's,")
+        }
+        _ => return decision,
+    };
     limits.push(report::Limitation::new(
         "regrowth",
         format!(
-            "`none` judged outside the drive's regrowths ({:.0} % of the held-out span left out): there the held-out residual is {:.3} × the record's noise and no model closes {:.1} % of it ({:.3} × with them)",
+            "{name} judged outside the drive's regrowths ({:.0} % of the held-out span left out): there the held-out residual is {:.3} × the record's noise and no model closes more than {:.1} % of it ({:.3} × with them)",
             100.0 * time,
             outside.residual_over_noise,
             100.0 * outside.gap_fraction,
             decision.residual_over_noise
         ),
     ));
+    if outside.verdict == verdict::Verdict::None {
+        return verdict::Decision {
+            verdict: verdict::Verdict::None,
+            closest: Answer::None,
+            ..decision
+        };
+    }
     verdict::Decision {
-        verdict: verdict::Verdict::None,
-        closest: Answer::None,
+        verdict: outside.verdict,
+        closest: outside.closest,
+        unexplained: outside.unexplained,
+        unexplained_rows: outside.unexplained_rows,
         ..decision
     }
+}
+
+/// The parameter face names `effect` (its hypothesis's status `named`).
+fn face_names(
+    face: &calibrate::ParameterFace,
+    effect: paragyro_simulator::effects::Effect,
+) -> bool {
+    face.hypotheses
+        .iter()
+        .any(|h| h.status == "named" && h.name.parse().ok() == Some(effect))
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.
@@ -832,7 +861,8 @@ fn diagnose_stages(rec: &Record, opts: &Options, wall: Instant) -> anyhow::Resul
         fits: &fits,
     };
     // 4c. `unknown` only at the drive's regrowths: judged outside them
-    let decision = none_outside_regrowths(&st, &ranking, &face, &row_noise, decision, &mut limits);
+    let decision =
+        at_noise_outside_regrowths(&st, &ranking, &face, &row_noise, decision, &mut limits);
     // the parameter face with the verdict's effect(s) fitted jointly (an unmodelled force
     // otherwise leaks into the θ)
     let (face, joint_model) = if decision.verdict_cols.is_empty() {

@@ -83,7 +83,7 @@ pub(super) fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
 /// regrowths"): a run can explain the record everywhere else and still leave its
 /// regrowths far above the noise (a thermal drift of −12.5 ppm/K whose run left 0.02 % of
 /// the gap and 25× the noise, all of the drive's departure at the regrowths). As
-/// [`crate::diagnose::none_outside_regrowths`] does for `none`.
+/// [`crate::diagnose::at_noise_outside_regrowths`] does for the calibrated model's verdict.
 fn outside_regrowths(inp: &Inputs<'_>, rows_e: &Rows, all: &Judged) -> Option<Judged> {
     if inp.rows.regrowth_note().is_some() || rows_e.regrowth_note().is_some() {
         return None;
