@@ -116,6 +116,15 @@ impl ParameterFace {
     pub fn parameter(&self, name: &str) -> Option<&ParamDeviation> {
         self.parameters.iter().find(|p| p.name == name)
     }
+
+    /// The effect the face names (its first hypothesis whose status is `named`:
+    /// anisodamping against a rate table), if any.
+    pub(crate) fn named_effect(&self) -> Option<paragyro_simulator::effects::Effect> {
+        self.hypotheses
+            .iter()
+            .find(|h| h.status == "named")
+            .and_then(|h| h.name.parse().ok())
+    }
 }
 
 /// The θ fit on a gap: `Δθ` (14) and its covariance (14 × 14, row-major).

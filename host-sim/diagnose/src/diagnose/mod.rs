@@ -564,11 +564,11 @@ pub(crate) fn drive_departure_at_regrowths(
 /// again on the samples outside the regrowths' windows: when there it is at its noise
 /// ([`verdict::decide`]'s own rule, [`NONE_NOISE_MAX`] and [`GAP_MIN`], on the rows' fits
 /// without those samples), `none`, or the effect the parameter face names (anisodamping
-/// against a rate table: `decide` names it at the noise), with a `regrowth` limitation
-/// that says so; the decision unchanged otherwise. After a deep collapse the calibrated model's own prediction spread
-/// is hundreds of times its spread elsewhere (docs/notes.md, "The model's prediction spread
-/// at the drive's regrowths"), so a departure only there is no effect's gap. Without
-/// another run of the record.
+/// against a rate table: `decide` names it at the noise), with a `regrowth` limitation that
+/// says so; the decision unchanged otherwise. After a deep collapse the calibrated model's
+/// own prediction spread is hundreds of times its spread elsewhere (docs/notes.md, "The
+/// model's prediction spread at the drive's regrowths"), so a departure only there is no
+/// effect's gap. Without another run of the record.
 fn at_noise_outside_regrowths(
     st: &Stage,
     ranking: &[report::Candidate],
@@ -599,7 +599,7 @@ fn at_noise_outside_regrowths(
         verdict::Verdict::Effects {
             primary,
             secondary: None,
-        } if outside.verdict_cols.is_empty() && face_names(face, *primary) => {
+        } if outside.verdict_cols.is_empty() && face.named_effect() == Some(*primary) => {
             format!("`{primary}`, the parameter face's,")
         }
         _ => return decision,
@@ -628,16 +628,6 @@ fn at_noise_outside_regrowths(
         unexplained_rows: outside.unexplained_rows,
         ..decision
     }
-}
-
-/// The parameter face names `effect` (its hypothesis's status `named`).
-fn face_names(
-    face: &calibrate::ParameterFace,
-    effect: paragyro_simulator::effects::Effect,
-) -> bool {
-    face.hypotheses
-        .iter()
-        .any(|h| h.status == "named" && h.name.parse().ok() == Some(effect))
 }
 
 /// Runs the diagnosis of a record: where the gap lies, which effect, how far it closes.

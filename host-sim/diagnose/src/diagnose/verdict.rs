@@ -212,11 +212,7 @@ pub(crate) fn decide(
     let hold_rows = fits.bank.hold.rows.max(1) as f64;
     let residual_over_noise = e0 / hold_rows / noise_row;
     // a parameter-face effect the calibration names (anisodamping against a rate table)
-    let face_named = face
-        .hypotheses
-        .iter()
-        .find(|h| h.status == "named")
-        .and_then(|h| h.name.parse::<Effect>().ok());
+    let face_named = face.named_effect();
     // a vibration at the noise: a tone far above the beat scan's chance level, resolved
     // from the pump's own frequency, that the held-out span finds again
     let fit_s = match (
