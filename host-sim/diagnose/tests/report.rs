@@ -150,13 +150,20 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
             Just(Stop::Failed)
         ]),
         prop::option::of(num()),
-        prop::option::of(("[a-z_]{3,20}=[0-9.e-]{1,8}", num(), num()).prop_map(
-            |(effect, unexplained, residual_over_noise)| Pair {
-                effect,
-                unexplained,
-                residual_over_noise,
-            },
-        )),
+        prop::option::of(
+            (
+                prop::option::of("[a-z_]{3,20}=[0-9.e-]{1,8}"),
+                "[a-z_]{3,20}=[0-9.e-]{1,8}",
+                num(),
+                num(),
+            )
+                .prop_map(|(first, effect, unexplained, residual_over_noise)| Pair {
+                    first,
+                    effect,
+                    unexplained,
+                    residual_over_noise,
+                }),
+        ),
         prop::option::of(
             (num(), num()).prop_map(|(share, residual_over_noise_with)| WithoutRegrowths {
                 share,

@@ -32,9 +32,9 @@
 //!
 //! **Two effects at once** (`partner`): a candidate whose last run fails the rules but
 //! closes part of the gap is tried with each other library effect fitted with the 14 θ
-//! about that run, and the pair judged by the same rules ([`Confirmation::with`]). A pair
-//! that passes is the verdict only when no candidate passes alone; it adds no run of the
-//! record.
+//! and its own columns about that run, and the pair judged by the same rules
+//! ([`Confirmation::with`]). A pair that passes is the verdict only when no candidate
+//! passes alone; it adds no run of the record.
 
 use serde::{Deserialize, Serialize};
 
@@ -45,7 +45,7 @@ use rules::{Judged, both_usable, judge, refit, rules};
 use paragyro_simulator::record::Record;
 
 use super::calibrate::{self, ThetaFit};
-use super::columns::Columns;
+use super::columns::{Column, Columns};
 use super::howfar::Specs;
 use super::lsq::Fit;
 use super::rank::Fits;
@@ -84,9 +84,9 @@ pub struct Confirmation {
     /// or on the budget.
     #[serde(default)]
     pub next_step: Option<f64>,
-    /// A second library effect that, fitted with the 14 θ about the last run, brings the
-    /// pair through the two rules where the run alone failed them (`partner`); the
-    /// fields above judge the candidate alone.
+    /// A second library effect that, fitted with the 14 θ and the candidate's size about
+    /// the last run, brings the pair through the two rules where the run alone failed them
+    /// (`partner`); the fields above judge the candidate alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub with: Option<Pair>,
     /// Set when the last run passed only on the held-out samples outside the drive's
@@ -107,6 +107,10 @@ pub struct WithoutRegrowths {
 /// The second effect of a pair that passed the two rules ([`Confirmation::with`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Pair {
+    /// The candidate at its size refitted with the second effect about its last run
+    /// (`NAME=SIZE[@PARAM]`; none in reports written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first: Option<String>,
     /// The second effect at its size fitted about the candidate's last run
     /// (`NAME=SIZE[@PARAM]`).
     pub effect: String,
@@ -652,7 +656,8 @@ fn test_one(
     let paired = if j.confirmed || stopped == Stop::Hopeless {
         None
     } else {
-        partner(inp, effect, ranking, &opts_e, &rows_e, &j, limits)
+        let first = (&specs[0], vib_phase);
+        partner(inp, first, ranking, &opts_e, &rows_e, &j, limits)
     };
     timing.tick("confirm_pair");
     let (with, second) = pair_of(paired, j.unexplained);
@@ -717,6 +722,7 @@ fn pair_of(paired: Option<Paired>, alone: f64) -> (Option<Pair>, Option<Second>)
     match paired {
         Some(p) => (
             Some(Pair {
+                first: Some(p.first.to_string()),
                 effect: p.spec.to_string(),
                 unexplained: p.judged.unexplained,
                 residual_over_noise: p.judged.residual_over_noise,
@@ -754,14 +760,21 @@ struct Second {
 struct Paired {
     effect: Effect,
     spec: EffectSpec,
+    /// The candidate at its size refitted with the second effect (its run's size when its
+    /// columns about the run could not be built).
+    first: EffectSpec,
     judged: Judged,
 }
 
 /// Two effects at once: the second library effect of a pair, when a candidate's last run
-/// `rows_e` fails the two rules alone but closes part of the gap (it leaves less than
-/// [`HOPELESS_UNEXPLAINED`] of it). Each other testable library effect of the ranking is
-/// fitted with the 14 θ on the gap that run leaves (its columns about the run; the angular
-/// vibration's about the calibrated model, at the beat scanned there) and kept when its
+/// `rows_e` (at `first`: its spec and the vibration's phase) fails the two rules alone but
+/// closes part of the gap (it leaves less than [`HOPELESS_UNEXPLAINED`] of it). Each other
+/// testable library effect of the ranking is fitted with the 14 θ and the candidate's own
+/// columns on the gap that run leaves (its columns about the run; the angular vibration's
+/// about the calibrated model, at the beat scanned there): alone, the candidate's size took
+/// up what of the second it could (a geometric nonlinearity of 2.83e-6 with a nonlinear
+/// damping of 1.93e-6, refsim seed 2727's record 0085, sized alone at 4.12e-6), and moves
+/// back with it. A second effect is kept when its
 /// size is significant (|size|/σ ≥ [`T_SIG`], its first column's) and the pair passes the
 /// same two rules against the run's noise; of those, the one leaving the least of the gap.
 /// The first effect carries the re-simulation (large, nonlinear), the second is linear
@@ -769,7 +782,7 @@ struct Paired {
 /// be built is skipped with a limitation.
 fn partner(
     inp: &Inputs<'_>,
-    first: Effect,
+    (spec1, phase1): (&EffectSpec, f64),
     ranking: &[Candidate],
     opts_e: &Options,
     rows_e: &Rows,
@@ -779,7 +792,26 @@ fn partner(
     if alone.unexplained.is_nan() || alone.unexplained >= HOPELESS_UNEXPLAINED {
         return None;
     }
+    let first = spec1.effect;
     let usable = both_usable(inp.rows, rows_e);
+    // the first effect's own columns about the run: its size moves with the second's
+    // (alone, its size took up what of the second it could)
+    let own = if first.signature() == Some(Signature::Vibration) {
+        Ok(super::vibration::columns_at(inp.rec, rows_e, inp.cols.beat).to_vec())
+    } else {
+        super::columns::effect_columns(first, inp.rec, opts_e, rows_e, inp.spans)
+    };
+    let own = match own {
+        Ok(v) if v.iter().all(|c| c.v.len() == rows_e.y.len()) => v,
+        Ok(_) => Vec::new(),
+        Err(e) => {
+            limits.push(Limitation::new(
+                "confirmation",
+                format!("{first}'s columns about its run ({e:#}): a second effect is fitted with its size held"),
+            ));
+            Vec::new()
+        }
+    };
     let mut best: Option<Paired> = None;
     let others = ranking
         .iter()
@@ -809,9 +841,11 @@ fn partner(
         if ecols.is_empty() || ecols.iter().any(|c| c.v.len() != rows_e.y.len()) {
             continue;
         }
-        let (f, e_c) = refit(rows_e, &usable, inp.spans, &ecols);
         let n = ecols.len();
-        let (Some(betas), Some(&sd)) = (f.beta.get(14..14 + n), f.sigma.get(14)) else {
+        let at = 14 + own.len();
+        let both: Vec<Column> = own.iter().cloned().chain(ecols).collect();
+        let (f, e_c) = refit(rows_e, &usable, inp.spans, &both);
+        let (Some(betas), Some(&sd)) = (f.beta.get(at..at + n), f.sigma.get(at)) else {
             continue;
         };
         if !(sd > 0.0 && betas[0].abs() / sd >= T_SIG) {
@@ -819,6 +853,16 @@ fn partner(
         }
         let Ok((spec, _)) = super::howfar::spec_of(e2, betas, inp.cols.beat, inp.rows.gpd) else {
             continue;
+        };
+        let moved = f.beta.get(14..at).unwrap_or(&[]);
+        let size = match (first.signature() == Some(Signature::Vibration), moved) {
+            (true, &[dr, di]) => vibration_step(spec1.size, phase1, inp.rows.gpd, dr, di).size,
+            (false, &[d]) => spec1.size + d,
+            _ => spec1.size,
+        };
+        let first_at = EffectSpec {
+            size,
+            ..spec1.clone()
         };
         let judged = rules(inp, &e_c, alone.nu2_e);
         if judged.confirmed
@@ -829,6 +873,7 @@ fn partner(
             best = Some(Paired {
                 effect: e2,
                 spec,
+                first: first_at,
                 judged,
             });
         }

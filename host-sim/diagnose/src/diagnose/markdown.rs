@@ -73,8 +73,8 @@ fn confirmation(s: &mut String, r: &Report) {
         ));
         if let Some(w) = &c.with {
             s.push_str(&format!(
-                "| `{}` + `{}` (fitted about its run) | {:.1} % | – | {} | – | – | as a pair |\n",
-                c.effect,
+                "| `{}` + `{}` (fitted together about its run) | {:.1} % | – | {} | – | – | as a pair |\n",
+                w.first.as_deref().unwrap_or(&c.effect),
                 w.effect,
                 100.0 * w.unexplained,
                 g4(w.residual_over_noise)
