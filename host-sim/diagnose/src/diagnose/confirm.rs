@@ -458,27 +458,46 @@ fn step_on(
     size: f64,
     phase: f64,
 ) -> anyhow::Result<(Fit, Option<EffectStep>)> {
-    let vibration = effect.signature() == Some(Signature::Vibration);
-    let ecols = if vibration {
-        super::vibration::columns_at(inp.rec, rows_e, inp.cols.beat).to_vec()
-    } else {
-        super::columns::effect_columns(effect, inp.rec, opts_e, rows_e, inp.spans)?
-    };
+    let ecols = own_columns(inp, effect, opts_e, rows_e)?;
     let (step, _) = refit(rows_e, usable, inp.spans, &ecols);
-    let moved = if vibration {
-        match step.beta.get(14..16) {
-            Some(&[dr, di]) => Some(vibration_step(size, phase, inp.rows.gpd, dr, di)),
-            _ => None,
-        }
+    let moved = effect_step(
+        effect,
+        step.beta.get(14..).unwrap_or(&[]),
+        size,
+        phase,
+        inp.rows.gpd,
+    );
+    Ok((step, moved))
+}
+
+/// The effect's own columns about its run `rows_e` (the vibration's two at the beat scanned
+/// on the calibrated model). An error when they cannot be built.
+fn own_columns(
+    inp: &Inputs<'_>,
+    effect: Effect,
+    opts_e: &Options,
+    rows_e: &Rows,
+) -> anyhow::Result<Vec<Column>> {
+    if effect.signature() == Some(Signature::Vibration) {
+        Ok(super::vibration::columns_at(inp.rec, rows_e, inp.cols.beat).to_vec())
     } else {
-        step.beta.get(14).map(|&d| EffectStep {
+        super::columns::effect_columns(effect, inp.rec, opts_e, rows_e, inp.spans)
+    }
+}
+
+/// The step on the effect (at `size`, the vibration at `phase`) from its own columns'
+/// coefficients `d` (the vibration's two, another effect's one); `None` without them.
+fn effect_step(effect: Effect, d: &[f64], size: f64, phase: f64, gpd: f64) -> Option<EffectStep> {
+    match (effect.signature() == Some(Signature::Vibration), d) {
+        (true, &[dr, di, ..]) => Some(vibration_step(size, phase, gpd, dr, di)),
+        (false, &[d, ..]) => Some(EffectStep {
             along: d,
             length: d,
             size: size + d,
             phase,
-        })
-    };
-    Ok((step, moved))
+        }),
+        _ => None,
+    }
 }
 
 /// A Gauss–Newton step on the effect being confirmed: its size's change along the size
@@ -796,12 +815,7 @@ fn partner(
     let usable = both_usable(inp.rows, rows_e);
     // the first effect's own columns about the run: its size moves with the second's
     // (alone, its size took up what of the second it could)
-    let own = if first.signature() == Some(Signature::Vibration) {
-        Ok(super::vibration::columns_at(inp.rec, rows_e, inp.cols.beat).to_vec())
-    } else {
-        super::columns::effect_columns(first, inp.rec, opts_e, rows_e, inp.spans)
-    };
-    let own = match own {
+    let own = match own_columns(inp, first, opts_e, rows_e) {
         Ok(v) if v.iter().all(|c| c.v.len() == rows_e.y.len()) => v,
         Ok(_) => Vec::new(),
         Err(e) => {
@@ -854,26 +868,21 @@ fn partner(
         let Ok((spec, _)) = super::howfar::spec_of(e2, betas, inp.cols.beat, inp.rows.gpd) else {
             continue;
         };
-        let moved = f.beta.get(14..at).unwrap_or(&[]);
-        let size = match (first.signature() == Some(Signature::Vibration), moved) {
-            (true, &[dr, di]) => vibration_step(spec1.size, phase1, inp.rows.gpd, dr, di).size,
-            (false, &[d]) => spec1.size + d,
-            _ => spec1.size,
-        };
-        let first_at = EffectSpec {
-            size,
-            ..spec1.clone()
-        };
         let judged = rules(inp, &e_c, alone.nu2_e);
         if judged.confirmed
             && best
                 .as_ref()
                 .is_none_or(|b| judged.unexplained < b.judged.unexplained)
         {
+            let moved = f.beta.get(14..at).unwrap_or(&[]);
+            let step = effect_step(first, moved, spec1.size, phase1, inp.rows.gpd);
             best = Some(Paired {
                 effect: e2,
                 spec,
-                first: first_at,
+                first: EffectSpec {
+                    size: step.map_or(spec1.size, |m| m.size),
+                    ..spec1.clone()
+                },
                 judged,
             });
         }
