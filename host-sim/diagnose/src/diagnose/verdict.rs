@@ -5,8 +5,9 @@
 //! beat scan's chance level (`vibration_at_noise`). An effect: the best candidate is
 //! significant and closes at least [`SHARE_MIN`] of what the floor closes, and it (with a
 //! second effect on top, if one adds at least [`SECOND_MIN`]) leaves at most
-//! [`UNEXPLAINED_MAX`] of the gap above the noise (at the noise, where `none` is judged,
-//! there is none to leave), and no row holding a share of the gap mostly unexplained.
+//! [`UNEXPLAINED_MAX`] of the gap above the noise (with the record within
+//! [`NONE_NOISE_MAX`] of its noise there is none to leave: what is above it is the noise
+//! estimate's own scatter), and no row holding a share of the gap mostly unexplained.
 //! `unknown`: a gap no library effect explains.
 
 use std::fmt;
@@ -254,7 +255,14 @@ pub(crate) fn decide(
     let after_fit = fits.bank.fit(&cols.with(&verdict_cols));
     // the verdict must explain the gap above the noise, not just most of what the floor does
     let noise_e = noise_row * hold_rows;
-    let unexplained = unexplained_share(e0, after_fit.e_hold, noise_e, at_noise);
+    // within the `none` rule's noise, with or without a gap past its gate, a share of what
+    // is above the noise is that scatter's
+    let unexplained = unexplained_share(
+        e0,
+        after_fit.e_hold,
+        noise_e,
+        residual_over_noise <= NONE_NOISE_MAX,
+    );
     let unexplained_rows = if verdict_cols.is_empty() {
         Vec::new()
     } else {
@@ -292,8 +300,9 @@ pub(crate) fn decide(
 
 /// The share of the held-out gap above the noise (`e0` the calibrated model's held-out
 /// energy, `noise_e` the noise's) that an answer leaving `after` does not explain; none
-/// when the record is at its noise (`at_noise`: what is above it there is within the
-/// noise estimate's own scatter, and a share of it is that scatter's) or below it.
+/// when the record is at its noise (`at_noise`: within [`NONE_NOISE_MAX`] of it, what is
+/// above it is within the noise estimate's own scatter, and a share of it is that
+/// scatter's) or below it.
 fn unexplained_share(e0: f64, after: f64, noise_e: f64, at_noise: bool) -> f64 {
     if e0 > noise_e && !at_noise {
         ((after - noise_e) / (e0 - noise_e)).max(0.0)
