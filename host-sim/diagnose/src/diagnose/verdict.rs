@@ -230,7 +230,8 @@ pub(crate) fn decide(
         .map(|c| c.effect);
     // the record at its own noise: nothing above it for a verdict to explain (a share of
     // the few per cent above it would be the noise estimate's own scatter)
-    let at_noise = gap_fraction < GAP_MIN && residual_over_noise <= NONE_NOISE_MAX;
+    let within_noise = residual_over_noise <= NONE_NOISE_MAX;
+    let at_noise = gap_fraction < GAP_MIN && within_noise;
     let closest = match ranking.first() {
         _ if at_noise => face_named
             .or(tone_named)
@@ -257,12 +258,7 @@ pub(crate) fn decide(
     let noise_e = noise_row * hold_rows;
     // within the `none` rule's noise, with or without a gap past its gate, a share of what
     // is above the noise is that scatter's
-    let unexplained = unexplained_share(
-        e0,
-        after_fit.e_hold,
-        noise_e,
-        residual_over_noise <= NONE_NOISE_MAX,
-    );
+    let unexplained = unexplained_share(e0, after_fit.e_hold, noise_e, within_noise);
     let unexplained_rows = if verdict_cols.is_empty() {
         Vec::new()
     } else {
@@ -300,11 +296,11 @@ pub(crate) fn decide(
 
 /// The share of the held-out gap above the noise (`e0` the calibrated model's held-out
 /// energy, `noise_e` the noise's) that an answer leaving `after` does not explain; none
-/// when the record is at its noise (`at_noise`: within [`NONE_NOISE_MAX`] of it, what is
-/// above it is within the noise estimate's own scatter, and a share of it is that
-/// scatter's) or below it.
-fn unexplained_share(e0: f64, after: f64, noise_e: f64, at_noise: bool) -> f64 {
-    if e0 > noise_e && !at_noise {
+/// when the record is within [`NONE_NOISE_MAX`] of its noise (`within_noise`: what is
+/// above the noise there is within the noise estimate's own scatter, and a share of it is
+/// that scatter's) or below it.
+fn unexplained_share(e0: f64, after: f64, noise_e: f64, within_noise: bool) -> f64 {
+    if e0 > noise_e && !within_noise {
         ((after - noise_e) / (e0 - noise_e)).max(0.0)
     } else {
         0.0
