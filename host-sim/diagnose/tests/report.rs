@@ -156,13 +156,22 @@ fn confirmation() -> impl Strategy<Value = Confirmation> {
                 "[a-z_]{3,20}=[0-9.e-]{1,8}",
                 num(),
                 num(),
+                prop::option::of((num(), num())),
             )
-                .prop_map(|(first, effect, unexplained, residual_over_noise)| Pair {
-                    first,
-                    effect,
-                    unexplained,
-                    residual_over_noise,
-                }),
+                .prop_map(
+                    |(first, effect, unexplained, residual_over_noise, outside)| Pair {
+                        first,
+                        effect,
+                        unexplained,
+                        residual_over_noise,
+                        outside_regrowths: outside.map(|(share, residual_over_noise_with)| {
+                            WithoutRegrowths {
+                                share,
+                                residual_over_noise_with,
+                            }
+                        }),
+                    },
+                ),
         ),
         prop::option::of(
             (num(), num()).prop_map(|(share, residual_over_noise_with)| WithoutRegrowths {

@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 
 mod rules;
 pub use rules::passes;
-use rules::{Judged, both_usable, judge, refit, rules};
+use rules::{Judged, both_usable, judge, judge_with, refit};
 
 use paragyro_simulator::record::Record;
 
@@ -118,6 +118,11 @@ pub struct Pair {
     pub unexplained: f64,
     /// Held-out residual per row after the pair, × the record's noise.
     pub residual_over_noise: f64,
+    /// Set when the pair passed only on the held-out samples outside the drive's regrowths
+    /// (as [`Confirmation::outside_regrowths`]); `unexplained` and `residual_over_noise`
+    /// are then the reading outside them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outside_regrowths: Option<WithoutRegrowths>,
 }
 
 /// Why a candidate's Gauss–Newton steps ended.
@@ -679,7 +684,7 @@ fn test_one(
         partner(inp, first, ranking, &opts_e, &rows_e, &j, limits)
     };
     timing.tick("confirm_pair");
-    let (with, second) = pair_of(paired, j.unexplained);
+    let (with, second) = pair_of(paired, j.unexplained, limits);
     let Judged {
         unexplained,
         unexplained_rows,
@@ -690,7 +695,7 @@ fn test_one(
     } = j;
     if confirmed && let Some(o) = outside_regrowths {
         limits.push(judged_without_regrowths(
-            &specs[0],
+            &specs[0].to_string(),
             o,
             residual_over_noise,
             unexplained,
@@ -715,11 +720,11 @@ fn test_one(
     })
 }
 
-/// The `regrowth` limitation of a candidate confirmed outside the drive's regrowths: its
-/// run's residual and share of the gap left there (`residual_over_noise`, `unexplained`)
-/// and the residual with them.
+/// The `regrowth` limitation of a candidate (or a pair, `spec` both effects) confirmed
+/// outside the drive's regrowths: its run's residual and share of the gap left there
+/// (`residual_over_noise`, `unexplained`) and the residual with them.
 fn judged_without_regrowths(
-    spec: &EffectSpec,
+    spec: &str,
     o: WithoutRegrowths,
     residual_over_noise: f64,
     unexplained: f64,
@@ -736,8 +741,24 @@ fn judged_without_regrowths(
 }
 
 /// A pair that passed ([`partner`]) as the confirmation's [`Pair`] and the [`Second`] the
-/// verdict takes; `alone` the share of the gap the candidate's run left alone.
-fn pair_of(paired: Option<Paired>, alone: f64) -> (Option<Pair>, Option<Second>) {
+/// verdict takes; `alone` the share of the gap the candidate's run left alone. A pair that
+/// passed only outside the drive's regrowths says so in `limits`.
+fn pair_of(
+    paired: Option<Paired>,
+    alone: f64,
+    limits: &mut Vec<Limitation>,
+) -> (Option<Pair>, Option<Second>) {
+    if let Some(p) = &paired
+        && let Some(o) = p.judged.outside_regrowths
+    {
+        let pair = format!("{}` + `{}", p.first, p.spec);
+        limits.push(judged_without_regrowths(
+            &pair,
+            o,
+            p.judged.residual_over_noise,
+            p.judged.unexplained,
+        ));
+    }
     match paired {
         Some(p) => (
             Some(Pair {
@@ -745,6 +766,7 @@ fn pair_of(paired: Option<Paired>, alone: f64) -> (Option<Pair>, Option<Second>)
                 effect: p.spec.to_string(),
                 unexplained: p.judged.unexplained,
                 residual_over_noise: p.judged.residual_over_noise,
+                outside_regrowths: p.judged.outside_regrowths,
             }),
             Some(Second {
                 effect: p.effect,
@@ -868,7 +890,7 @@ fn partner(
         let Ok((spec, _)) = super::howfar::spec_of(e2, betas, inp.cols.beat, inp.rows.gpd) else {
             continue;
         };
-        let judged = rules(inp, &e_c, alone.nu2_e);
+        let judged = judge_with(inp, rows_e, &both, &e_c, alone.nu2_e);
         if judged.confirmed
             && best
                 .as_ref()

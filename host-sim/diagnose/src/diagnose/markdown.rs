@@ -73,9 +73,14 @@ fn confirmation(s: &mut String, r: &Report) {
         ));
         if let Some(w) = &c.with {
             s.push_str(&format!(
-                "| `{}` + `{}` (fitted together about its run) | {:.1} % | – | {} | – | – | as a pair |\n",
+                "| `{}` + `{}` (fitted together about its run{}) | {:.1} % | – | {} | – | – | as a pair |\n",
                 w.first.as_deref().unwrap_or(&c.effect),
                 w.effect,
+                if w.outside_regrowths.is_some() {
+                    "; outside the drive's regrowths"
+                } else {
+                    ""
+                },
                 100.0 * w.unexplained,
                 g4(w.residual_over_noise)
             ));

@@ -71,7 +71,24 @@ pub(super) fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
     if j.confirmed {
         return Ok(j);
     }
-    Ok(outside_regrowths(inp, rows_e, &j).unwrap_or(j))
+    Ok(outside_regrowths(inp, rows_e, &[], &j).unwrap_or(j))
+}
+
+/// [`rules`] on the held-out energy per row `e_c` that a run `rows_e` and the columns
+/// `extra` fitted about it leave (a pair, `partner`), against the run's noise `nu2_e`; when
+/// that fails, judged again outside the drive's regrowths as [`judge`] judges a run alone.
+pub(super) fn judge_with(
+    inp: &Inputs<'_>,
+    rows_e: &Rows,
+    extra: &[Column],
+    e_c: &[f64; NR],
+    nu2_e: f64,
+) -> Judged {
+    let j = rules(inp, e_c, nu2_e);
+    if j.confirmed {
+        return j;
+    }
+    outside_regrowths(inp, rows_e, extra, &j).unwrap_or(j)
 }
 
 /// A run that fails the two rules, whose drive departs from the record's at the drive's
@@ -84,7 +101,12 @@ pub(super) fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
 /// regrowths far above the noise (a thermal drift of −12.5 ppm/K whose run left 0.02 % of
 /// the gap and 25× the noise, all of the drive's departure at the regrowths). As
 /// [`crate::diagnose::at_noise_outside_regrowths`] does for the calibrated model's verdict.
-fn outside_regrowths(inp: &Inputs<'_>, rows_e: &Rows, all: &Judged) -> Option<Judged> {
+fn outside_regrowths(
+    inp: &Inputs<'_>,
+    rows_e: &Rows,
+    extra: &[Column],
+    all: &Judged,
+) -> Option<Judged> {
     if inp.rows.regrowth_note().is_some() || rows_e.regrowth_note().is_some() {
         return None;
     }
@@ -95,7 +117,7 @@ fn outside_regrowths(inp: &Inputs<'_>, rows_e: &Rows, all: &Judged) -> Option<Ju
         .enumerate()
         .map(|(k, u)| u && !near.get(k).copied().unwrap_or(false))
         .collect();
-    let (_, e_c) = refit(rows_e, &usable, inp.spans, &[]);
+    let (_, e_c) = refit(rows_e, &usable, inp.spans, extra);
     let e_b = base_energy(inp, &usable);
     let j = rules_with(&e_b, &e_c, all.nu2_e);
     j.confirmed.then_some(Judged {
