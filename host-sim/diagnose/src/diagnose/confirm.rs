@@ -748,32 +748,31 @@ fn pair_of(
     alone: f64,
     limits: &mut Vec<Limitation>,
 ) -> (Option<Pair>, Option<Second>) {
-    if let Some(p) = &paired
-        && let Some(o) = p.judged.outside_regrowths
-    {
-        let pair = format!("{}` + `{}", p.first, p.spec);
-        limits.push(judged_without_regrowths(
-            &pair,
-            o,
-            p.judged.residual_over_noise,
-            p.judged.unexplained,
-        ));
-    }
     match paired {
-        Some(p) => (
-            Some(Pair {
-                first: Some(p.first.to_string()),
-                effect: p.spec.to_string(),
-                unexplained: p.judged.unexplained,
-                residual_over_noise: p.judged.residual_over_noise,
-                outside_regrowths: p.judged.outside_regrowths,
-            }),
-            Some(Second {
-                effect: p.effect,
-                added: alone - p.judged.unexplained,
-                unexplained: p.judged.unexplained,
-            }),
-        ),
+        Some(p) => {
+            if let Some(o) = p.judged.outside_regrowths {
+                limits.push(judged_without_regrowths(
+                    &format!("{}` + `{}", p.first, p.spec),
+                    o,
+                    p.judged.residual_over_noise,
+                    p.judged.unexplained,
+                ));
+            }
+            (
+                Some(Pair {
+                    first: Some(p.first.to_string()),
+                    effect: p.spec.to_string(),
+                    unexplained: p.judged.unexplained,
+                    residual_over_noise: p.judged.residual_over_noise,
+                    outside_regrowths: p.judged.outside_regrowths,
+                }),
+                Some(Second {
+                    effect: p.effect,
+                    added: alone - p.judged.unexplained,
+                    unexplained: p.judged.unexplained,
+                }),
+            )
+        }
         None => (None, None),
     }
 }

@@ -67,11 +67,8 @@ pub(super) struct Judged {
 /// The two rules on the gap the effect's run `rows_e` leaves (module docs); a run that
 /// fails them judged again outside the drive's regrowths ([`outside_regrowths`]).
 pub(super) fn judge(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
-    let j = judge_all(inp, rows_e)?;
-    if j.confirmed {
-        return Ok(j);
-    }
-    Ok(outside_regrowths(inp, rows_e, &[], &j).unwrap_or(j))
+    let (e_c, nu2_e) = left_by_run(inp, rows_e)?;
+    Ok(judge_with(inp, rows_e, &[], &e_c, nu2_e))
 }
 
 /// [`rules`] on the held-out energy per row `e_c` that a run `rows_e` and the columns
@@ -145,8 +142,10 @@ fn base_energy(inp: &Inputs<'_>, usable: &[bool]) -> [f64; NR] {
     fit_all(&refs, &rows.y, usable, spans).1
 }
 
-/// [`judge`] on every usable sample of the held-out span.
-fn judge_all(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
+/// What the effect's run `rows_e` leaves on every usable sample of the held-out span: the
+/// held-out energy per row with the 14 θ refitted about it, and the record's noise energy
+/// ratio re-estimated against it.
+fn left_by_run(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<([f64; NR], f64)> {
     let Inputs {
         rec,
         rows,
@@ -171,7 +170,7 @@ fn judge_all(inp: &Inputs<'_>, rows_e: &Rows) -> anyhow::Result<Judged> {
         .min(nu2),
         None => nu2,
     };
-    Ok(rules(inp, &e_c, nu2_e))
+    Ok((e_c, nu2_e))
 }
 
 /// The two rules on the held-out energy per row `e_c` a run leaves, against the record's
