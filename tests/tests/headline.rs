@@ -12,8 +12,8 @@
 //! * `paragyro-sim -- rate-response`: the chirp, the step and the ramp of that report
 //!   regenerated here (`paragyro_simulator::rate_response`, f32, seed 1; seconds), with the
 //!   precision the table shows;
-//! * `paragyro-refsim --example score -- out/refsim-3131`: the results of that run (blind
-//!   run 29) as committed in `host-sim/diagnose/blind-benchmark.md` (generating and
+//! * `paragyro-refsim --example score -- out/refsim-3232`: the results of that run (blind
+//!   run 30) as committed in `host-sim/diagnose/blind-benchmark.md` (generating and
 //!   diagnosing 100 records takes most of an hour).
 //!
 //! And the results table of `host-sim/README.md` is `paragyro-sim results`' table, cell
@@ -237,13 +237,13 @@ fn rate_source() -> String {
     )
 }
 
-/// The results section of blind run 29 (the independent generator's records) in its
+/// The results section of blind run 30 (the independent generator's records) in its
 /// results file.
 fn blind_source() -> String {
     let text = read("host-sim/diagnose/blind-benchmark.md");
     let start = text
-        .find("## Run 29 results")
-        .expect("blind-benchmark.md has \"## Run 29 results\"");
+        .find("## Run 30 results")
+        .expect("blind-benchmark.md has \"## Run 30 results\"");
     let rest = &text[start..];
     let end = rest[3..].find("\n## ").map_or(rest.len(), |k| k + 3);
     rest[..end].to_string()
@@ -276,7 +276,7 @@ fn the_headline_table_is_what_its_sources_give() {
             (thermal.get_or_insert_with(thermal_source).as_str(), false)
         } else if source.contains("paragyro-fil -- budget") {
             (budget.as_str(), !measured)
-        } else if source.contains("paragyro-refsim --example score -- out/refsim-3131") {
+        } else if source.contains("paragyro-refsim --example score -- out/refsim-3232") {
             (blind.as_str(), false)
         } else {
             bad.push(format!("{figure}: no known source in `{source}`"));
