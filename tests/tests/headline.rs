@@ -222,6 +222,7 @@ fn rate_source() -> String {
         seed: 1,
         allan_s: None,
         allan_zero_memory_s: None,
+        allan_forgetting: None,
         allan_settle_s: 0.0,
         allan_warm_start: false,
     };

@@ -180,13 +180,14 @@ pub fn run_core<'py>(
 #[pyfunction]
 // the Python signature's keyword arguments, one each (the CLI's flags)
 #[allow(clippy::too_many_arguments)]
-#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, allan_settle_s=rate_response::ALLAN_SETTLE_S, allan_warm_start=false, out=None))]
+#[pyo3(name = "rate_response", signature = (seed=1, precision="f32", allan_s=None, allan_zero_memory_s=None, allan_forgetting=None, allan_settle_s=rate_response::ALLAN_SETTLE_S, allan_warm_start=false, out=None))]
 pub fn datasheet(
     py: Python<'_>,
     seed: u64,
     precision: &str,
     allan_s: Option<f64>,
     allan_zero_memory_s: Option<f64>,
+    allan_forgetting: Option<f64>,
     allan_settle_s: f64,
     allan_warm_start: bool,
     out: Option<PathBuf>,
@@ -207,6 +208,13 @@ pub fn datasheet(
                 "allan_zero_memory_s must be finite and >= 0 (got {m})"
             )));
         }
+        if let Some(l) = allan_forgetting
+            && !(l > 0.0 && l <= 1.0)
+        {
+            return Err(Fail::Argument(format!(
+                "allan_forgetting must be in (0, 1] (got {l})"
+            )));
+        }
         if !(allan_settle_s.is_finite() && allan_settle_s >= 0.0) {
             return Err(Fail::Argument(format!(
                 "allan_settle_s must be finite and >= 0 (got {allan_settle_s})"
@@ -217,6 +225,7 @@ pub fn datasheet(
             seed,
             allan_s,
             allan_zero_memory_s,
+            allan_forgetting,
             allan_settle_s,
             allan_warm_start,
         };

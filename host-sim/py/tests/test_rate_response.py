@@ -34,3 +34,9 @@ def test_an_allan_settle_that_is_not_a_time_is_an_argument_error():
         paragyro.rate_response(allan_s=10.0, allan_settle_s=-1.0)
     with pytest.raises(paragyro.ArgumentError):
         paragyro.rate_response(allan_s=10.0, allan_settle_s=float("nan"))
+
+
+def test_a_forgetting_outside_0_1_is_an_argument_error():
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(paragyro.ArgumentError):
+            paragyro.rate_response(allan_s=10.0, allan_forgetting=bad)

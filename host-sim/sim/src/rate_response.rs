@@ -46,6 +46,9 @@ pub struct Options {
     /// The Allan runs' memory of the rate's zero (scenario `rate_zero_memory_s`, core
     /// `rate.zero_memory_s`; 0: the slow RLS's μ̂xy every sample); `None`: the core's.
     pub allan_zero_memory_s: Option<f64>,
+    /// The Allan runs' slow RLS forgetting factor (scenario `estimator.forgetting`, core
+    /// `rls.forgetting`); `None`: the base scenario's 0.999 (a 2 s memory).
+    pub allan_forgetting: Option<f64>,
     /// The Allan record starts this long after the start-up (`T0_S`), s: the device at
     /// its operating point, the rate's zero settled (IEEE Std 952's stabilised gyro; a
     /// warm start does not carry the zero's mean). The figures from the start-up over the
@@ -173,6 +176,8 @@ pub struct AllanResult {
     pub duration_s: f64,
     /// How long after the start-up (`T0_S`) the record starts, s.
     pub settle_s: f64,
+    /// The runs' slow RLS forgetting factor per sample ([`Options::allan_forgetting`]).
+    pub forgetting: f64,
     /// ARW, bias instability, and the rate's zero alone at the minimum (flat in
     /// report.json).
     #[serde(flatten)]

@@ -13,6 +13,7 @@ fn opts(seed: u64) -> Options {
         seed,
         allan_s: None,
         allan_zero_memory_s: None,
+        allan_forgetting: None,
         allan_settle_s: 0.0,
         allan_warm_start: false,
     }
@@ -337,13 +338,7 @@ fn the_allan_report_gives_the_rate_zeros_own_share() {
         rate_response::allan(&o, 0.0, 12.0).unwrap()
     };
     let at_1s = |a: &rate_response::AllanResult| {
-        let i = a
-            .tau_s
-            .iter()
-            .enumerate()
-            .min_by(|x, y| x.1.ln().abs().total_cmp(&y.1.ln().abs()))
-            .unwrap()
-            .0;
+        let i = nearest_1s(a);
         (a.zero_adev_dps[i], a.adev_dps[i])
     };
     let held = run(None);
@@ -366,4 +361,44 @@ fn the_allan_report_gives_the_rate_zeros_own_share() {
     );
     assert!(z_held < r_held, "held: zero {z_held} of {r_held}");
     assert!(z_every > 5.0 * z_held, "{z_every} against {z_held}");
+}
+
+/// `allan_forgetting` sets the static runs' slow RLS memory and the report says which:
+/// with the zero taken from the slow RLS every sample, a 10 s memory (λ = 0.9998) wanders
+/// the zero less at τ ≈ 1 s than the base's 2 s; outside (0, 1] it is an error.
+#[test]
+fn the_allan_runs_take_the_slow_memory_asked_for() {
+    let run = |forgetting: Option<f64>| {
+        let o = Options {
+            allan_settle_s: 6.0,
+            allan_zero_memory_s: Some(0.0),
+            allan_forgetting: forgetting,
+            ..opts(3)
+        };
+        rate_response::allan(&o, 0.0, 12.0)
+    };
+    let zero_at_1s = |a: &rate_response::AllanResult| a.zero_adev_dps[nearest_1s(a)];
+    let base = run(None).unwrap();
+    let long = run(Some(0.9998)).unwrap();
+    assert_eq!(base.forgetting, 0.999);
+    assert_eq!(long.forgetting, 0.9998);
+    let (b, l) = (zero_at_1s(&base), zero_at_1s(&long));
+    assert!(
+        l < 0.5 * b,
+        "the zero at 1 s: {l} at 10 s against {b} at 2 s"
+    );
+    for bad in [0.0, 1.5, f64::NAN] {
+        let e = run(Some(bad)).unwrap_err().to_string();
+        assert!(e.contains("forgetting"), "{e}");
+    }
+}
+
+/// The index of an Allan curve's τ nearest 1 s.
+fn nearest_1s(a: &rate_response::AllanResult) -> usize {
+    a.tau_s
+        .iter()
+        .enumerate()
+        .min_by(|x, y| x.1.ln().abs().total_cmp(&y.1.ln().abs()))
+        .unwrap()
+        .0
 }

@@ -27,6 +27,11 @@ pub struct Args {
     /// slow RLS's 2 s estimate every sample), instead of the core's.
     #[arg(long, value_name = "S")]
     pub allan_zero_memory_s: Option<f64>,
+    /// The Allan runs' slow RLS forgetting factor per sample, in (0, 1] (scenario
+    /// `estimator.forgetting`; the memory is 1/(1 − λ) samples), instead of the
+    /// base scenario's 0.999.
+    #[arg(long, value_name = "LAMBDA")]
+    pub allan_forgetting: Option<f64>,
     /// The Allan record starts this long after the start-up, s (the rate's zero settled;
     /// the figures from the start-up are reported beside).
     #[arg(long, value_name = "S", default_value_t = rate_response::ALLAN_SETTLE_S)]
@@ -53,6 +58,13 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
             "--allan-zero-memory-s must be finite and >= 0 (got {m})"
         )));
     }
+    if let Some(l) = a.allan_forgetting
+        && !(l > 0.0 && l <= 1.0)
+    {
+        return Err(fail(EXIT_RUN)(anyhow::anyhow!(
+            "--allan-forgetting must be in (0, 1] (got {l})"
+        )));
+    }
     if !(a.allan_settle_s.is_finite() && a.allan_settle_s >= 0.0) {
         return Err(fail(EXIT_RUN)(anyhow::anyhow!(
             "--allan-settle-s must be finite and >= 0 (got {})",
@@ -64,6 +76,7 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         seed: a.seed,
         allan_s: a.allan_s,
         allan_zero_memory_s: a.allan_zero_memory_s,
+        allan_forgetting: a.allan_forgetting,
         allan_settle_s: a.allan_settle_s,
         allan_warm_start: a.allan_warm_start,
     };

@@ -184,13 +184,14 @@ def rate_response(
     precision: str = "f32",
     allan_s: Optional[float] = None,
     allan_zero_memory_s: Optional[float] = None,
+    allan_forgetting: Optional[float] = None,
     allan_settle_s: float = 600.0,
     allan_warm_start: bool = False,
     out: Optional[PathLike] = None,
 ) -> Dict[str, Any]:
     """The rate channel's datasheet on the simulated device, as ``paragyro-sim
     rate-response`` (``--seed``, ``--precision``, ``--allan-s``,
-    ``--allan-zero-memory-s``, ``--allan-settle-s``, ``--allan-warm-start``; with ``out`` it writes report.json, report.md and the PNGs
+    ``--allan-zero-memory-s``, ``--allan-forgetting``, ``--allan-settle-s``, ``--allan-warm-start``; with ``out`` it writes report.json, report.md and the PNGs
     there too): its report.json as a dict (``step``, ``frequency`` with
     ``bandwidth_3db_hz``, ``sines``, ``ramp``, ``g_sensitivity``, ``noise``, ``allan``), plus
     ``"markdown"``, the report's table."""
@@ -199,6 +200,7 @@ def rate_response(
         precision=precision,
         allan_s=allan_s,
         allan_zero_memory_s=allan_zero_memory_s,
+        allan_forgetting=allan_forgetting,
         allan_settle_s=allan_settle_s,
         allan_warm_start=allan_warm_start,
         out=None if out is None else os.fspath(out),

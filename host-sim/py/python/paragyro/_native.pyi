@@ -40,6 +40,7 @@ def rate_response(
     precision: str = "f32",
     allan_s: Optional[float] = None,
     allan_zero_memory_s: Optional[float] = None,
+    allan_forgetting: Optional[float] = None,
     allan_settle_s: float = 600.0,
     allan_warm_start: bool = False,
     out: Optional[str] = None,

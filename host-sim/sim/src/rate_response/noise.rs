@@ -141,6 +141,13 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
     let settle = o.allan_settle_s;
     let mut sc = scenario(&ev, T0_S + settle + duration_s)?;
     sc.estimator.rate_zero_memory_s = o.allan_zero_memory_s;
+    if let Some(l) = o.allan_forgetting {
+        ensure!(
+            l > 0.0 && l <= 1.0,
+            "the Allan runs' forgetting must be in (0, 1] (got {l})"
+        );
+        sc.estimator.forgetting = l;
+    }
     let run = match o.precision {
         Precision::F32 => cold_run::<f32>(&sc, o.seed)?,
         Precision::F64 => cold_run::<f64>(&sc, o.seed)?,
@@ -164,6 +171,7 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
         rate_dps,
         duration_s,
         settle_s: settle,
+        forgetting: sc.estimator.forgetting,
         figures: c.figures,
         tau_s: c.tau_s,
         adev_dps: c.adev_dps,

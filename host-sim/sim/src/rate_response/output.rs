@@ -76,10 +76,11 @@ pub fn markdown(r: &Report) -> String {
     for a in &r.allan {
         let _ = writeln!(
             s,
-            "| ARW / bias instability at {} °/s ({} s, from {} s after the start-up) | {} | > 0.5 °/√h / 10–1000 °/h |",
+            "| ARW / bias instability at {} °/s ({} s, from {} s after the start-up, slow RLS λ = {}) | {} | > 0.5 °/√h / 10–1000 °/h |",
             a.rate_dps,
             a.duration_s,
             a.settle_s,
+            a.forgetting,
             allan_cell(&a.figures)
         );
         if let Some(f) = &a.from_start_up {
