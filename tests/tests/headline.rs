@@ -12,9 +12,9 @@
 //! * `paragyro-sim -- rate-response`: the chirp, the step and the ramp of that report
 //!   regenerated here (`paragyro_simulator::rate_response`, f32, seed 1; seconds), with the
 //!   precision the table shows;
-//! * `paragyro-refsim --example score -- out/refsim-3232`: the results of that run (blind
-//!   run 30) as committed in `host-sim/diagnose/blind-benchmark.md` (generating and
-//!   diagnosing 100 records takes most of an hour).
+//! * `paragyro-refsim --example score -- out/refsim-3333`: the results of blind run 31,
+//!   pooled with run 30, as committed in `host-sim/diagnose/blind-benchmark.md`
+//!   (generating and diagnosing 100 records takes most of an hour).
 //!
 //! And the results table of `host-sim/README.md` is `paragyro-sim results`' table, cell
 //! for cell but the wall times.
@@ -238,13 +238,13 @@ fn rate_source() -> String {
     )
 }
 
-/// The results section of blind run 30 (the independent generator's records) in its
-/// results file.
+/// The results section of blind run 31 (the independent generator's records, pooled with
+/// run 30) in its results file.
 fn blind_source() -> String {
     let text = read("host-sim/diagnose/blind-benchmark.md");
     let start = text
-        .find("## Run 30 results")
-        .expect("blind-benchmark.md has \"## Run 30 results\"");
+        .find("## Run 31 results")
+        .expect("blind-benchmark.md has \"## Run 31 results\"");
     let rest = &text[start..];
     let end = rest[3..].find("\n## ").map_or(rest.len(), |k| k + 3);
     rest[..end].to_string()
@@ -277,7 +277,7 @@ fn the_headline_table_is_what_its_sources_give() {
             (thermal.get_or_insert_with(thermal_source).as_str(), false)
         } else if source.contains("paragyro-fil -- budget") {
             (budget.as_str(), !measured)
-        } else if source.contains("paragyro-refsim --example score -- out/refsim-3232") {
+        } else if source.contains("paragyro-refsim --example score -- out/refsim-3333") {
             (blind.as_str(), false)
         } else {
             bad.push(format!("{figure}: no known source in `{source}`"));
