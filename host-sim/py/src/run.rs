@@ -209,7 +209,7 @@ pub fn datasheet(
             )));
         }
         if let Some(l) = allan_forgetting
-            && !(l > 0.0 && l <= 1.0)
+            && !rate_response::forgetting_ok(l)
         {
             return Err(Fail::Argument(format!(
                 "allan_forgetting must be in (0, 1] (got {l})"

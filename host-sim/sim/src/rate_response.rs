@@ -60,6 +60,12 @@ pub struct Options {
     pub allan_warm_start: bool,
 }
 
+/// A slow RLS forgetting factor the Allan runs take ([`Options::allan_forgetting`]): in
+/// (0, 1].
+pub fn forgetting_ok(l: f64) -> bool {
+    l > 0.0 && l <= 1.0
+}
+
 /// The default of [`Options::allan_settle_s`], s: one memory of the core's rate zero
 /// (`rate.zero_memory_s`) is not needed, ten minutes of it are (the zero's error falls as
 /// 1/√t from a reset).

@@ -59,7 +59,7 @@ pub fn exec(a: Args, ctx: &mut Ctx) -> Result<(), Failure> {
         )));
     }
     if let Some(l) = a.allan_forgetting
-        && !(l > 0.0 && l <= 1.0)
+        && !rate_response::forgetting_ok(l)
     {
         return Err(fail(EXIT_RUN)(anyhow::anyhow!(
             "--allan-forgetting must be in (0, 1] (got {l})"

@@ -143,7 +143,7 @@ pub fn allan(o: &Options, rate_dps: f64, duration_s: f64) -> Result<AllanResult>
     sc.estimator.rate_zero_memory_s = o.allan_zero_memory_s;
     if let Some(l) = o.allan_forgetting {
         ensure!(
-            l > 0.0 && l <= 1.0,
+            super::forgetting_ok(l),
             "the Allan runs' forgetting must be in (0, 1] (got {l})"
         );
         sc.estimator.forgetting = l;
